@@ -1,0 +1,47 @@
+"""The ``pecli`` typer application."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from pecli import __version__
+from pecli.cli import config, play
+
+app = typer.Typer(
+    name="pecli",
+    help="Pursuit-evasion between car-like robots with limited sensors: play, train, rank and export policies.",
+    rich_markup_mode="rich",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"pecli {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", "-V", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    """Pursuit-evasion between car-like robots with limited sensors (Gonultas & Isler).
+
+    Every command takes a scenario with [bold]--config[/] (a YAML file or a built-in name).
+    """
+
+
+app.command(name="play", rich_help_panel="Play and evaluate")(play.play)
+app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()

@@ -1,0 +1,68 @@
+"""What every command shares: consoles, the user-error boundary, option types."""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
+
+import typer
+from rich.console import Console
+
+from pecli.errors import PecliError
+from pecli.scenario import Scenario, load_scenario
+
+console = Console()
+err_console = Console(stderr=True)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+DEBUG_VARIABLE = "PECLI_DEBUG"
+
+ConfigOption = Annotated[
+    str,
+    typer.Option("--config", "-c", help="Scenario YAML file, or a built-in name: paper, quick, car_vs_car, point_mass, robots."),
+]
+SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed: the same seed plays the same games.")]
+
+
+def user_errors(command: F) -> F:
+    """Turn a :class:`PecliError` into one red line and exit code 1.
+
+    Anything else is a bug: one line and exit code 2, with the traceback only when
+    ``PECLI_DEBUG`` is set.
+    """
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except (typer.Exit, typer.Abort, KeyboardInterrupt):
+            raise
+        except PecliError as exc:
+            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(code=1) from None
+        except Exception as exc:
+            if os.environ.get(DEBUG_VARIABLE):
+                raise
+            err_console.print(
+                f"[bold red]internal error:[/] {type(exc).__name__}: {exc} "
+                f"(set {DEBUG_VARIABLE}=1 to see the traceback, and please report it)",
+                highlight=False,
+                soft_wrap=True,
+            )
+            raise typer.Exit(code=2) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def scenario_from_option(config: str) -> Scenario:
+    """Load the scenario named by a ``--config`` option."""
+    return load_scenario(config)
+
+
+def require_positive(value: int, name: str) -> int:
+    if value < 1:
+        raise PecliError(f"{name} must be at least 1, got {value}")
+    return value

@@ -1,0 +1,93 @@
+"""``pecli play``: one pursuer against one evader, all episodes as one batch."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from pecli.cli.common import ConfigOption, SeedOption, console, err_console, require_positive, user_errors
+from pecli.errors import PecliError
+from pecli.match import play_match
+from pecli.policies import resolve_policy
+from pecli.scenario import load_scenario
+
+POLICY_HELP = "A built-in name ({names}), a policy file, or module:Class."
+
+
+@user_errors
+def play(
+    pursuer: Annotated[
+        str, typer.Option("--pursuer", "-p", help=POLICY_HELP.format(names="pure-pursuit, random-walk"))
+    ] = "pure-pursuit",
+    evader: Annotated[
+        str, typer.Option("--evader", "-e", help=POLICY_HELP.format(names="greedy, random-walk, rash"))
+    ] = "greedy",
+    config: ConfigOption = "paper",
+    episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes to play, all at once.")] = 100,
+    seed: SeedOption = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as one JSON object.")] = False,
+    render: Annotated[
+        Path | None,
+        typer.Option("--render", help="Draw episodes: a .png of up to 4 episodes, or a .gif of the first one."),
+    ] = None,
+) -> None:
+    """Play a pursuer against an evader and report the capture rate and time-to-capture.
+
+    The time-to-capture is normalised by the horizon T; a timeout counts 1.0.
+    Episode i under one seed always starts from the same state, whoever plays it.
+    """
+    require_positive(episodes, "--episodes")
+    if render is not None and render.suffix.lower() not in (".png", ".gif"):
+        raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
+    scenario = load_scenario(config)
+    pursuer_policy = resolve_policy(pursuer, "pursuer", scenario)
+    evader_policy = resolve_policy(evader, "evader", scenario)
+    record = 0 if render is None else (1 if render.suffix.lower() == ".gif" else 4)
+
+    with Progress(
+        TextColumn("[bold]playing[/] {task.description}"),
+        BarColumn(),
+        TextColumn("step {task.completed:.0f}/{task.total:.0f}  {task.fields[running]} running"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+        disable=as_json or not err_console.is_terminal,
+    ) as progress:
+        task = progress.add_task(f"{episodes} episodes", total=scenario.horizon, running=episodes)
+        result, recording = play_match(
+            scenario,
+            pursuer_policy,
+            evader_policy,
+            episodes=episodes,
+            seed=seed,
+            record=record,
+            on_step=lambda step, running: progress.update(task, completed=step, running=running),
+        )
+
+    if as_json:
+        typer.echo(json.dumps(result.summary()))
+    else:
+        table = Table(title=f"{pursuer} vs {evader} on {scenario.name} (seed {seed})")
+        table.add_column("episodes", justify="right")
+        table.add_column("capture rate", justify="right")
+        table.add_column("time-to-capture (σ)", justify="right")
+        table.add_row(
+            str(result.episodes),
+            f"{result.capture_rate:.3f}",
+            f"{result.time_to_capture_mean:.3f} ({result.time_to_capture_std:.3f})",
+        )
+        console.print(table)
+
+    if render is not None and recording is not None:
+        from pecli.game.render import animate_episode, draw_episodes
+
+        if render.suffix.lower() == ".gif":
+            animate_episode(recording, render)
+        else:
+            draw_episodes(recording, render, episodes=record)
+        err_console.print(f"wrote {render}", highlight=False)

@@ -1,0 +1,13 @@
+"""Errors a user can cause. The CLI turns them into one red line and exit code 1."""
+
+
+class PecliError(Exception):
+    """A mistake in the user's input: a bad config, policy name, path or option."""
+
+
+class ConfigError(PecliError):
+    """A scenario file that cannot be read or does not validate."""
+
+
+class PolicyError(PecliError):
+    """A policy string that does not resolve, or resolves to the wrong role."""

@@ -1,0 +1,9 @@
+"""The pursuit-evasion game: batched NumPy simulation, sensors, observations, PettingZoo adapter.
+
+No torch here: the game is plain NumPy.
+"""
+
+from pecli.game.game import Game, StepResult
+from pecli.game.observation import Decoded, ObservationCodec
+
+__all__ = ["Decoded", "Game", "ObservationCodec", "StepResult"]

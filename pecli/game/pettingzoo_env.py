@@ -1,0 +1,92 @@
+"""The game as a PettingZoo ``ParallelEnv``, for multi-agent libraries that speak PettingZoo.
+
+    >>> env = parallel_env("paper")
+    >>> observations, infos = env.reset(seed=0)
+    >>> while env.agents:
+    ...     actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+    ...     observations, rewards, terminations, truncations, infos = env.step(actions)
+
+Agents are ``"pursuer"`` and ``"evader"``; both act every step. ``state()`` is the privileged
+full state scaled to [-1, 1] plus ``t/T``, for centralised critics. A capture and the timeout
+both *terminate* the episode: the timeout is part of the game (it is observed through the time
+index and carries the -lambda_capture reward), not an external truncation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from pecli.game.game import Game
+from pecli.roles import ROLES, Role
+from pecli.scenario import Scenario, load_scenario
+
+
+class PursuitEvasionEnv(ParallelEnv):
+    """One pursuit-evasion game with the PettingZoo parallel API."""
+
+    metadata = {"name": "pecli_pursuit_evasion_v0", "render_modes": [], "is_parallelizable": True}
+
+    def __init__(self, scenario: Scenario | str = "paper") -> None:
+        self.scenario = load_scenario(scenario) if isinstance(scenario, str) else scenario
+        self.possible_agents: list[Role] = list(ROLES)
+        self.agents: list[Role] = []
+        self.render_mode = None
+        self._game = Game(self.scenario, n=1, seed=0)
+        self.observation_spaces = {
+            role: spaces.Box(-1.0, 1.0, shape=(self._game.obs_dim[role],), dtype=np.float32) for role in ROLES
+        }
+        self.action_spaces = {role: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for role in ROLES}
+        self.state_space = spaces.Box(-1.0, 1.0, shape=(self._game.state_dim + 1,), dtype=np.float32)
+
+    def observation_space(self, agent: Role) -> spaces.Box:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: Role) -> spaces.Box:
+        return self.action_spaces[agent]
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[Role, np.ndarray], dict[Role, dict]]:
+        obs = self._game.reset(seed=seed)
+        self.agents = list(self.possible_agents)
+        return {role: obs[role][0] for role in ROLES}, {role: {} for role in ROLES}
+
+    def step(self, actions: dict[Role, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
+        if not self.agents:
+            raise RuntimeError("the episode is over: call reset() first")
+        missing = [role for role in ROLES if role not in actions]
+        if missing:
+            raise KeyError(f"no action for {', '.join(missing)}")
+        result = self._game.step(
+            np.asarray(actions["pursuer"], dtype=np.float64).reshape(1, 2),
+            np.asarray(actions["evader"], dtype=np.float64).reshape(1, 2),
+        )
+        done = bool(result.done[0])
+        observations = {role: result.obs[role][0] for role in ROLES}
+        rewards = {role: float(result.rewards[role][0]) for role in ROLES}
+        terminations = {role: done for role in ROLES}
+        truncations = {role: False for role in ROLES}
+        info = {"captured": bool(result.captured[0]), "distance": float(result.distance[0])}
+        infos = {role: {**info, "sees_opponent": bool(result.seen[role][0])} for role in ROLES}
+        if done:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        return self._game.normalised_state()[0]
+
+    def render(self) -> None:
+        """Not supported step by step; use ``pecli play --render`` for pictures and GIFs."""
+        return None
+
+    def close(self) -> None:
+        return None
+
+
+def parallel_env(scenario: Scenario | str = "paper") -> PursuitEvasionEnv:
+    """PettingZoo-style constructor."""
+    return PursuitEvasionEnv(scenario)

@@ -1,0 +1,133 @@
+"""Play a pursuer against an evader: all episodes as one batch, and the paper's metrics.
+
+    >>> result, _ = play_match(scenario, pursuer, evader, episodes=500, seed=0)
+    >>> result.capture_rate, result.time_to_capture_mean, result.time_to_capture_std
+
+Episode ``i`` under seed ``s`` always starts from the same state, whoever plays it
+(see :mod:`pecli.game.seeding`), so matches with the same seed are paired comparisons.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from pecli.game import Game
+from pecli.policies.base import Policy
+from pecli.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """Outcomes of ``episodes`` games; arrays are ``(episodes,)``."""
+
+    captured: np.ndarray  # bool: the pursuer won
+    steps: np.ndarray  # steps played until capture or timeout
+    horizon: int  # T of the scenario
+
+    @property
+    def episodes(self) -> int:
+        return int(self.captured.shape[0])
+
+    @property
+    def time_to_capture(self) -> np.ndarray:
+        """Normalised time-to-capture per episode: ``steps / T``, a timeout counts 1.0."""
+        return np.where(self.captured, self.steps / self.horizon, 1.0)
+
+    @property
+    def capture_rate(self) -> float:
+        return float(self.captured.mean())
+
+    @property
+    def time_to_capture_mean(self) -> float:
+        return float(self.time_to_capture.mean())
+
+    @property
+    def time_to_capture_std(self) -> float:
+        """Population standard deviation (ddof = 0) of the normalised time-to-capture."""
+        return float(self.time_to_capture.std())
+
+    def summary(self) -> dict[str, float | int]:
+        """The metrics as a JSON-ready dict."""
+        return {
+            "capture_rate": self.capture_rate,
+            "time_to_capture_mean": self.time_to_capture_mean,
+            "time_to_capture_std": self.time_to_capture_std,
+            "episodes": self.episodes,
+        }
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Trajectories of the first ``r`` episodes, for drawing; ``T1`` = steps played + 1 (the start)."""
+
+    scenario: Scenario
+    pursuer: np.ndarray  # (T1, r, k_p) SI states
+    evader: np.ndarray  # (T1, r, k_e) SI states
+    seen_by_pursuer: np.ndarray  # (T1, r) bool
+    seen_by_evader: np.ndarray  # (T1, r) bool
+    steps: np.ndarray  # (r,) steps each episode lasted
+    captured: np.ndarray  # (r,) bool
+
+
+def policy_seeds(seed: int) -> tuple[int, int]:
+    """Independent seeds for the pursuer's and the evader's own randomness, derived from a match seed."""
+    a, b = np.random.SeedSequence(seed).generate_state(2, dtype=np.uint64)
+    return int(a), int(b)
+
+
+def play_match(
+    scenario: Scenario,
+    pursuer: Policy,
+    evader: Policy,
+    episodes: int,
+    seed: int = 0,
+    record: int = 0,
+    on_step: Callable[[int, int], None] | None = None,
+) -> tuple[MatchResult, Recording | None]:
+    """Play ``episodes`` games at once until each ends; record the first ``record`` of them.
+
+    ``on_step(step, games_still_running)`` is called after every step (for progress displays).
+    """
+    if pursuer.role != "pursuer" or evader.role != "evader":
+        raise ValueError(f"need a pursuer and an evader, got {pursuer.role} and {evader.role}")
+    if episodes < 1:
+        raise ValueError("episodes must be at least 1")
+    game = Game(scenario, n=episodes, seed=seed)
+    obs = game.reset(seed=seed)
+    pursuer_seed, evader_seed = policy_seeds(seed)
+    pursuer.reset(episodes, seed=pursuer_seed)
+    evader.reset(episodes, seed=evader_seed)
+    captured = np.zeros(episodes, dtype=bool)
+    record = min(record, episodes)
+    frames: list[tuple[np.ndarray, dict]] = []
+    if record:
+        frames.append((game.state()[:record], {k: v[:record] for k, v in game.seen().items()}))
+    for step in range(1, scenario.horizon + 1):
+        result = game.step(pursuer.act(obs["pursuer"]), evader.act(obs["evader"]))
+        captured |= result.captured
+        if record:
+            frames.append((game.state()[:record], {k: v[:record] for k, v in result.seen.items()}))
+        running = int((~game.finished).sum())
+        if on_step is not None:
+            on_step(step, running)
+        if running == 0:
+            break
+        obs = result.obs
+    match = MatchResult(captured=captured, steps=game.t.copy(), horizon=scenario.horizon)
+    if not record:
+        return match, None
+    states = np.stack([f[0] for f in frames])
+    kp = game.dynamics["pursuer"].state_dim
+    recording = Recording(
+        scenario=scenario,
+        pursuer=states[:, :, :kp],
+        evader=states[:, :, kp:],
+        seen_by_pursuer=np.stack([f[1]["pursuer"] for f in frames]),
+        seen_by_evader=np.stack([f[1]["evader"] for f in frames]),
+        steps=match.steps[:record].copy(),
+        captured=captured[:record].copy(),
+    )
+    return match, recording

@@ -1,0 +1,18 @@
+"""Everything that acts: the :class:`Policy` interface, the paper's heuristics, and name resolution."""
+
+from pecli.policies.base import HeuristicPolicy, Policy
+from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
+from pecli.policies.registry import BUILTINS, builtin_names, register_loader, resolve_policy
+
+__all__ = [
+    "BUILTINS",
+    "Greedy",
+    "HeuristicPolicy",
+    "Policy",
+    "PurePursuit",
+    "RandomWalk",
+    "Rash",
+    "builtin_names",
+    "register_loader",
+    "resolve_policy",
+]

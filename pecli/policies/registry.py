@@ -1,0 +1,93 @@
+"""Turn a policy string into a :class:`Policy`.
+
+A policy string is one of:
+
+* a built-in name: ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk`` (either);
+* ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
+  take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
+* a file path, loaded by the loader registered for its suffix (checkpoints, exported models).
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from collections.abc import Callable
+from pathlib import Path
+
+from pecli.errors import PolicyError
+from pecli.policies.base import HeuristicPolicy, Policy
+from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
+from pecli.roles import Role
+from pecli.scenario import Scenario
+
+BUILTINS: dict[str, type[HeuristicPolicy]] = {
+    cls.name: cls for cls in (PurePursuit, Greedy, RandomWalk, Rash)
+}
+
+Loader = Callable[[Path, Role, Scenario, "int | None"], Policy]
+_LOADERS: dict[str, Loader] = {}
+
+
+def register_loader(suffix: str, loader: Loader) -> None:
+    """Load files ending in ``suffix`` (e.g. ``".zip"``) with ``loader(path, role, scenario, seed)``."""
+    _LOADERS[suffix.lower()] = loader
+
+
+def builtin_names(role: Role | None = None) -> list[str]:
+    """Names of the built-in policies, those that can play ``role`` if given."""
+    return [name for name, cls in BUILTINS.items() if role is None or role in cls.roles]
+
+
+def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None = None) -> Policy:
+    """The policy named by ``spec``, playing ``role`` in ``scenario``; :class:`PolicyError` if it cannot."""
+    spec = spec.strip()
+    if spec in BUILTINS:
+        cls = BUILTINS[spec]
+        if role not in cls.roles:
+            plays = " or ".join(cls.roles)
+            raise PolicyError(f"'{spec}' plays {plays}, not {role} (for {role}: {', '.join(builtin_names(role))})")
+        return cls(scenario, role, seed=seed)
+    path = Path(spec)
+    if path.exists():
+        return _load_file(path, role, scenario, seed)
+    if ":" in spec:
+        return _load_class(spec, role, scenario, seed)
+    if path.suffix:
+        raise PolicyError(f"policy file not found: {spec}")
+    raise PolicyError(
+        f"unknown policy '{spec}' for {role}: use one of {', '.join(builtin_names(role))}, "
+        "a file, or module:Class"
+    )
+
+
+def _load_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    loader = _LOADERS.get(path.suffix.lower())
+    if loader is None:
+        kinds = ", ".join(sorted(_LOADERS)) or "none yet"
+        raise PolicyError(f"cannot load {path}: no policy loader for '{path.suffix}' files (known: {kinds})")
+    return loader(path, role, scenario, seed)
+
+
+def _load_class(spec: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    module_name, _, class_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise PolicyError(f"cannot import module '{module_name}' for policy '{spec}': {exc}") from None
+    cls = getattr(module, class_name, None)
+    if cls is None or not callable(cls):
+        raise PolicyError(f"module '{module_name}' has no class '{class_name}'")
+    offered = {"scenario": scenario, "role": role, "seed": seed}
+    try:
+        params = inspect.signature(cls).parameters
+        accepts_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+        kwargs = {k: v for k, v in offered.items() if accepts_any or k in params}
+        policy = cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise PolicyError(f"cannot create '{spec}': {exc}") from None
+    if not isinstance(policy, Policy):
+        raise PolicyError(f"'{spec}' is not a Policy: it needs a 'role' attribute and reset() and act() methods")
+    if policy.role != role:
+        raise PolicyError(f"'{spec}' plays {policy.role}, not {role}")
+    return policy

@@ -1,0 +1,99 @@
+"""The command line through typer's test runner, and once as a real process."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from pecli import __version__
+from pecli.cli import app
+
+runner = CliRunner()
+
+
+def invoke(*args: str):
+    return runner.invoke(app, list(args))
+
+
+def test_version() -> None:
+    result = invoke("--version")
+    assert result.exit_code == 0 and result.stdout.strip() == f"pecli {__version__}"
+
+
+def test_help_lists_grouped_commands() -> None:
+    result = invoke("--help")
+    assert result.exit_code == 0
+    for text in ("play", "config", "Play and evaluate", "Scenarios"):
+        assert text in result.stdout
+
+
+def test_play_json() -> None:
+    result = invoke("play", "--pursuer", "pure-pursuit", "--evader", "greedy", "-c", "quick", "-n", "40", "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert set(data) == {"capture_rate", "time_to_capture_mean", "time_to_capture_std", "episodes"}
+    assert data["episodes"] == 40 and 0.0 <= data["capture_rate"] <= 1.0
+    again = invoke("play", "-c", "quick", "-n", "40", "--json")
+    assert json.loads(again.stdout) == data  # defaults: pure-pursuit vs greedy, seed 0
+
+
+def test_play_table() -> None:
+    result = invoke("play", "-c", "quick", "-n", "10", "--evader", "rash")
+    assert result.exit_code == 0
+    assert "capture rate" in result.stdout and "pure-pursuit vs rash" in result.stdout
+
+
+@pytest.mark.parametrize("suffix", [".png", ".gif"])
+def test_play_render(tmp_path: Path, suffix: str) -> None:
+    out = tmp_path / f"episodes{suffix}"
+    result = invoke("play", "-c", "quick", "-n", "3", "--render", str(out))
+    assert result.exit_code == 0, result.output
+    assert out.stat().st_size > 1000
+    assert out.read_bytes()[:4] == (b"\x89PNG" if suffix == ".png" else b"GIF8")
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left behind
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["play", "--pursuer", "greedy"], "'greedy' plays evader, not pursuer"),
+        (["play", "--evader", "nobody"], "unknown policy 'nobody'"),
+        (["play", "-c", "missing.yaml"], "config not found: missing.yaml"),
+        (["play", "-n", "0"], "--episodes must be at least 1"),
+        (["play", "--render", "out.mp4"], "--render must end in .png or .gif"),
+        (["config", "check", "nope"], "config not found"),
+    ],
+)
+def test_user_errors_are_one_line_and_exit_1(args: list[str], message: str) -> None:
+    result = invoke(*args)
+    assert result.exit_code == 1
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0] and lines[0].startswith("error:")
+    assert "Traceback" not in result.output
+
+
+def test_bad_config_file_names_key_and_file(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\narena: {width: 16, height: 16, depth: 3}\n")
+    result = invoke("play", "-c", str(bad))
+    assert result.exit_code == 1
+    assert f"{bad}: arena.depth: unknown key" in result.output
+
+
+def test_config_commands() -> None:
+    listed = invoke("config", "list")
+    assert listed.exit_code == 0 and "point_mass" in listed.stdout
+    shown = invoke("config", "show", "paper")
+    assert shown.exit_code == 0 and "steer_rate_max: 3.2" in shown.stdout
+    checked = invoke("config", "check", "paper", "quick")
+    assert checked.exit_code == 0 and checked.stdout.count("ok") == 2
+
+
+def test_python_dash_m_and_console_script() -> None:
+    result = subprocess.run([sys.executable, "-m", "pecli", "--version"], capture_output=True, text=True, check=False)
+    assert result.returncode == 0 and result.stdout.strip() == f"pecli {__version__}"

@@ -1,0 +1,74 @@
+"""Matches: the paper's metrics, determinism and paired start states."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pecli.match import MatchResult, play_match
+from pecli.policies import resolve_policy
+from pecli.scenario import Scenario
+
+
+def test_metrics_by_hand() -> None:
+    result = MatchResult(captured=np.array([True, True, False, False]), steps=np.array([100, 300, 400, 400]), horizon=400)
+    np.testing.assert_allclose(result.time_to_capture, [0.25, 0.75, 1.0, 1.0])
+    assert result.capture_rate == 0.5
+    assert result.time_to_capture_mean == pytest.approx(0.75)
+    # population std of (0.25, 0.75, 1, 1): mean 0.75, squared deviations 0.25, 0, 0.0625, 0.0625
+    assert result.time_to_capture_std == pytest.approx(np.sqrt(0.375 / 4))
+    assert result.summary() == {
+        "capture_rate": 0.5,
+        "time_to_capture_mean": pytest.approx(0.75),
+        "time_to_capture_std": pytest.approx(np.sqrt(0.375 / 4)),
+        "episodes": 4,
+    }
+
+
+def test_a_timeout_counts_one_even_if_steps_are_fewer() -> None:
+    result = MatchResult(captured=np.array([False]), steps=np.array([10]), horizon=400)
+    assert result.time_to_capture_mean == 1.0
+
+
+def play(scenario: Scenario, evader: str, seed: int, episodes: int = 64, record: int = 0):
+    return play_match(
+        scenario,
+        resolve_policy("pure-pursuit", "pursuer", scenario),
+        resolve_policy(evader, "evader", scenario),
+        episodes=episodes,
+        seed=seed,
+        record=record,
+    )
+
+
+def test_matches_are_deterministic_under_a_seed(quick: Scenario) -> None:
+    a, _ = play(quick, "random-walk", seed=3)
+    b, _ = play(quick, "random-walk", seed=3)
+    c, _ = play(quick, "random-walk", seed=4)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    np.testing.assert_array_equal(a.captured, b.captured)
+    assert not np.array_equal(a.steps, c.steps)
+
+
+def test_pairings_share_start_states(quick: Scenario) -> None:
+    _, greedy = play(quick, "greedy", seed=8, episodes=16, record=16)
+    _, rash = play(quick, "rash", seed=8, episodes=16, record=16)
+    np.testing.assert_array_equal(greedy.pursuer[0], rash.pursuer[0])
+    np.testing.assert_array_equal(greedy.evader[0], rash.evader[0])
+
+
+def test_recording_matches_the_outcome(quick: Scenario) -> None:
+    result, recording = play(quick, "greedy", seed=1, episodes=32, record=5)
+    assert recording is not None
+    assert recording.pursuer.shape[1:] == (5, 5) and recording.evader.shape[1:] == (5, 4)
+    assert recording.pursuer.shape[0] == int(result.steps.max()) + 1
+    for i in range(5):
+        end = recording.steps[i]
+        gap = np.hypot(*(recording.pursuer[end, i, :2] - recording.evader[end, i, :2]))
+        assert (gap <= quick.capture_distance) == recording.captured[i]
+
+
+def test_pure_pursuit_vs_greedy_is_a_contest(quick: Scenario) -> None:
+    greedy, _ = play(quick, "greedy", seed=0, episodes=200)
+    assert 0.1 < greedy.capture_rate < 0.9
+    assert 0.0 < greedy.time_to_capture_mean <= 1.0

@@ -19,7 +19,7 @@ install: $(STAMP)
 
 demo: install
 	$(VENV)/bin/pecli play --pursuer pure-pursuit --evader greedy --config configs/quick.yaml \
-		--episodes 200 --seed 0 --render docs/demo.gif
+		--episodes 200 --seed 0 --render runs/demo.gif
 
 test: install
 	$(PY) -m pytest -q

@@ -228,7 +228,7 @@ class Game:
         if dx is None or dy is None or distance is None:
             dx, dy = evader[0] - pursuer[0], evader[1] - pursuer[1]
             distance = np.sqrt(dx * dx + dy * dy)
-        time_fraction = t * (1.0 / self.scenario.horizon)
+        time_fraction = t / self.scenario.horizon
         p_dyn, e_dyn = self.dynamics["pursuer"], self.dynamics["evader"]
         p_sensor, e_sensor = self.scenario.pursuer.sensor, self.scenario.evader.sensor
         seen_p = in_view(dx, dy, distance, p_dyn.heading_cos_sin(pursuer), self.fov["pursuer"], p_sensor.range)

@@ -10,6 +10,9 @@ Agents are ``"pursuer"`` and ``"evader"``; both act every step. ``state()`` is t
 full state scaled to [-1, 1] plus ``t/T``, for centralised critics. A capture and the timeout
 both *terminate* the episode: the timeout is part of the game (it is observed through the time
 index and carries the -lambda_capture reward), not an external truncation.
+
+The env runs :class:`~pecli.game.single.SingleGame`, the scalar mirror of the batched game,
+which steps one game about 20 times faster than ``Game(n=1)``.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from pecli.game.game import Game
+from pecli.game.single import SingleGame
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario, load_scenario
 
@@ -35,7 +38,7 @@ class PursuitEvasionEnv(ParallelEnv):
         self.possible_agents: list[Role] = list(ROLES)
         self.agents: list[Role] = []
         self.render_mode = None
-        self._game = Game(self.scenario, n=1, seed=0)
+        self._game = SingleGame(self.scenario, seed=0)
         self.observation_spaces = {
             role: spaces.Box(-1.0, 1.0, shape=(self._game.obs_dim[role],), dtype=np.float32) for role in ROLES
         }
@@ -53,7 +56,7 @@ class PursuitEvasionEnv(ParallelEnv):
     ) -> tuple[dict[Role, np.ndarray], dict[Role, dict]]:
         obs = self._game.reset(seed=seed)
         self.agents = list(self.possible_agents)
-        return {role: obs[role][0] for role in ROLES}, {role: {} for role in ROLES}
+        return obs, {role: {} for role in ROLES}
 
     def step(self, actions: dict[Role, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
@@ -61,23 +64,20 @@ class PursuitEvasionEnv(ParallelEnv):
         missing = [role for role in ROLES if role not in actions]
         if missing:
             raise KeyError(f"no action for {', '.join(missing)}")
-        result = self._game.step(
-            np.asarray(actions["pursuer"], dtype=np.float64).reshape(1, 2),
-            np.asarray(actions["evader"], dtype=np.float64).reshape(1, 2),
-        )
-        done = bool(result.done[0])
-        observations = {role: result.obs[role][0] for role in ROLES}
-        rewards = {role: float(result.rewards[role][0]) for role in ROLES}
+        result = self._game.step(actions["pursuer"], actions["evader"])
+        done = result.done
         terminations = {role: done for role in ROLES}
         truncations = {role: False for role in ROLES}
-        info = {"captured": bool(result.captured[0]), "distance": float(result.distance[0])}
-        infos = {role: {**info, "sees_opponent": bool(result.seen[role][0])} for role in ROLES}
+        infos = {
+            role: {"captured": result.captured, "distance": result.distance, "sees_opponent": result.seen[role]}
+            for role in ROLES
+        }
         if done:
             self.agents = []
-        return observations, rewards, terminations, truncations, infos
+        return result.obs, result.rewards, terminations, truncations, infos
 
     def state(self) -> np.ndarray:
-        return self._game.normalised_state()[0]
+        return self._game.normalised_state()
 
     def render(self) -> None:
         """Not supported step by step; use ``pecli play --render`` for pictures and GIFs."""

@@ -146,8 +146,52 @@ class Reward(_Model):
     distance: float = Field(default=1.0, ge=0, description="lambda_d: cost per metre of distance per step")
 
 
+class Curriculum(_Model):
+    """Paper section V-A: over the first ``fraction`` of training the pursuer's FOV shrinks from 2pi
+    to its configured value and the evader's speed limit grows from 0 to its configured value."""
+
+    enabled: bool = True
+    fraction: float = Field(default=0.3, gt=0, le=1, description="share of the training budget it spans")
+
+
+class Training(_Model):
+    """How a learner is trained (Stable-Baselines3 TD3/DDPG on a frozen-opponent view)."""
+
+    algo: Literal["td3", "ddpg"] = "td3"
+    steps: int = Field(default=1_000_000, ge=1, description="budget in learner transitions (all envs together)")
+    n_envs: int = Field(default=8, ge=1, description="games stepped together in one process")
+    frame_skip: int = Field(default=2, ge=1, description="game steps each action is held for")
+    frame_stack: int = Field(default=2, ge=1, description="observations stacked into the actor's input")
+    history_length: int = Field(default=200, ge=1, description="game steps the belief window looks back")
+    history_stride: int = Field(default=10, ge=1, description="keep every k-th step of the window (10: 1 Hz)")
+    reward_scale: float = Field(default=0.001, gt=0, description="rewards are multiplied by this for learning")
+    learning_rate: float = Field(default=5e-4, gt=0)
+    buffer_size: int = Field(default=100_000, ge=1)
+    batch_size: int = Field(default=512, ge=1)
+    gamma: float = Field(default=0.99, gt=0, le=1)
+    tau: float = Field(default=0.005, gt=0, le=1)
+    action_noise: float = Field(default=0.1, ge=0, description="std of the Gaussian exploration noise")
+    net_arch: list[int] = Field(default=[128, 128], min_length=1)
+    learning_starts: int = Field(default=5_000, ge=0, description="transitions collected before learning")
+    train_freq: int = Field(default=1, ge=1, description="vector-env steps between updates")
+    gradient_steps: int = Field(default=2, ge=1, description="gradient steps per update")
+    checkpoint_every: int = Field(default=250, ge=1, description="episodes between zoo checkpoints")
+    eval_every: int = Field(default=0, ge=0, description="transitions between evaluations; 0: none")
+    eval_episodes: int = Field(default=200, ge=1)
+    torch_threads: int = Field(default=1, ge=1, description="torch threads per process (1 is fastest on a shared CPU)")
+    curriculum: Curriculum = Curriculum()
+
+    @model_validator(mode="after")
+    def _window_fits(self) -> Training:
+        if self.history_stride > self.history_length:
+            raise ValueError(
+                f"history_stride ({self.history_stride}) must not exceed history_length ({self.history_length})"
+            )
+        return self
+
+
 class Scenario(_Model):
-    """One game: the arena, the clock, both players and what they observe."""
+    """One game: the arena, the clock, both players and what they observe; and how to train on it."""
 
     name: str = "custom"
     description: str = ""
@@ -162,6 +206,7 @@ class Scenario(_Model):
     reward: Reward = Reward()
     pursuer: Agent
     evader: Agent
+    training: Training = Training()
 
     @model_validator(mode="after")
     def _arena_fits_capture(self) -> Scenario:
@@ -186,8 +231,8 @@ class Scenario(_Model):
         raise ValueError(f"role must be 'pursuer' or 'evader', not {role!r}")
 
     def fingerprint(self) -> str:
-        """A short hash of everything that changes the game (not the name or description)."""
-        payload = self.model_dump(exclude={"name", "description"}, mode="json")
+        """A short hash of everything that changes the game (not the name, description or training)."""
+        payload = self.model_dump(exclude={"name", "description", "training"}, mode="json")
         text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 

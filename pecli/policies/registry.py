@@ -26,7 +26,15 @@ BUILTINS: dict[str, type[HeuristicPolicy]] = {
 }
 
 Loader = Callable[[Path, Role, Scenario, "int | None"], Policy]
-_LOADERS: dict[str, Loader] = {}
+
+
+def _load_checkpoint(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    from pecli.policies.learned import LearnedPolicy  # torch and SB3 load only when a checkpoint is asked for
+
+    return LearnedPolicy.load(path, role, scenario, seed)
+
+
+_LOADERS: dict[str, Loader] = {".zip": _load_checkpoint}
 
 
 def register_loader(suffix: str, loader: Loader) -> None:

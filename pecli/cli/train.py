@@ -1,0 +1,93 @@
+"""``pecli train pursuer|evader``: train one role with TD3/DDPG against a frozen opponent."""
+
+from __future__ import annotations
+
+import enum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from pecli.cli.common import ConfigOption, SeedOption, err_console, user_errors
+from pecli.errors import PecliError
+from pecli.scenario import load_scenario
+
+
+class RoleChoice(str, enum.Enum):
+    pursuer = "pursuer"
+    evader = "evader"
+
+
+class AlgoChoice(str, enum.Enum):
+    td3 = "td3"
+    ddpg = "ddpg"
+
+
+@user_errors
+def train(
+    role: Annotated[RoleChoice, typer.Argument(help="The role to train.", show_default=False)],
+    config: ConfigOption = "paper",
+    opponent: Annotated[
+        str | None,
+        typer.Option("--opponent", "-o", help="The frozen opponent: a built-in, a checkpoint, or module:Class. "
+                     "Default: greedy for a pursuer, pure-pursuit for an evader."),
+    ] = None,
+    algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm.")] = None,
+    steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
+    seed: SeedOption = 0,
+    zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
+    name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-role-seed-time).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its last checkpoint.")] = False,
+    overrides: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="Override a training setting, e.g. --set batch_size=256 --set curriculum.enabled=false."),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
+) -> None:
+    """Train a pursuer or an evader with Stable-Baselines3 against a frozen opponent.
+
+    Hyperparameters come from the config's [bold]training[/] section (the paper's values in
+    paper.yaml). Checkpoints go to [bold]zoo/<run>/<role>/[/] every checkpoint_every episodes;
+    Ctrl-C saves the run so that [bold]--resume[/] continues it with its replay buffer.
+    TensorBoard logs are in zoo/<run>/tb.
+    """
+    from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, default_run_name, parse_overrides, with_overrides
+    from pecli.rl.train import train as run_training
+    from pecli.zoo import Run
+
+    role_name = role.value
+    if resume:
+        if name is None:
+            raise PecliError("--resume needs the --name of the run to continue")
+        scenario = Run.open(zoo, name).scenario()
+    else:
+        scenario = load_scenario(config)
+    settings = parse_overrides(overrides or [])
+    if steps is not None:
+        settings["steps"] = steps
+    if algo is not None:
+        settings["algo"] = algo.value
+    if settings:
+        scenario = with_overrides(scenario, settings)
+    job = TrainJob(
+        role=role_name,
+        scenario=scenario,
+        opponent=opponent or DEFAULT_OPPONENT[role_name],
+        zoo=zoo,
+        name=name or default_run_name(role_name, scenario, seed),
+        seed=seed,
+        resume=resume,
+        progress=not quiet and err_console.is_terminal,
+    )
+
+    def started(run: Run) -> None:
+        err_console.print(f"run [bold]{run.path}[/]: {role_name} vs {job.opponent} on {scenario.name}, "
+                          f"{scenario.training.steps:,} steps", highlight=False)
+
+    try:
+        final = run_training(job, on_start=started)
+    except KeyboardInterrupt:
+        err_console.print(f"[yellow]interrupted[/]: saved {zoo / job.name / role_name}/last.zip; "
+                          f"continue with --resume --name {job.name}", highlight=False)
+        raise typer.Exit(code=130) from None
+    err_console.print(f"[green]done[/]: {final}", highlight=False)

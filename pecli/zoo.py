@@ -1,0 +1,175 @@
+"""The checkpoint zoo: a folder of training runs, each with its config, command and checkpoints.
+
+Layout of one run::
+
+    zoo/<run>/
+        config.yaml          the resolved scenario, training section included
+        command.txt          the exact command that started the run (and each resume)
+        versions.json        pecli, Stable-Baselines3, torch, numpy and Python versions
+        <role>/
+            ep0000250.zip    a checkpoint every ``checkpoint_every`` episodes (SB3 zip)
+            ep0000250.json   its metadata (see :class:`CheckpointMeta`)
+            final.zip/.json  the end of training
+            last.zip/.json   where an interrupted run resumes from, with
+            replay_buffer.pkl  its replay buffer
+
+Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import shlex
+import sys
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pecli import __version__
+from pecli.errors import PecliError
+from pecli.io import atomic_path, atomic_write_json, atomic_write_text
+from pecli.roles import Role
+from pecli.scenario import Scenario, scenario_from_dict
+
+FINAL = "final"
+LAST = "last"
+REPLAY_BUFFER = "replay_buffer.pkl"
+
+
+class ZooError(PecliError):
+    """A run or checkpoint that is missing, damaged or does not fit."""
+
+
+@dataclass
+class CheckpointMeta:
+    """What a checkpoint is: written next to it as ``<name>.json``."""
+
+    role: Role
+    steps: int  # learner transitions trained on
+    episodes: int  # episodes finished while training
+    algo: str  # td3 | ddpg
+    belief: str  # none | bimdn | ...
+    scenario: str  # scenario name
+    scenario_hash: str  # Scenario.fingerprint(): a checkpoint only plays the game it learned
+    opponent: str  # the policy string it trained against
+    frame_skip: int
+    frame_stack: int
+    history_length: int
+    history_stride: int
+    run: str = ""
+    seed: int = 0
+    pecli_version: str = __version__
+    created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> CheckpointMeta:
+        known = {f for f in cls.__dataclass_fields__}
+        return cls(**{k: v for k, v in data.items() if k in known})
+
+
+def metadata_path(checkpoint: Path) -> Path:
+    """The metadata file of a checkpoint: ``ep0000250.zip`` → ``ep0000250.json``."""
+    return checkpoint.with_suffix(".json")
+
+
+def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
+    """The metadata of ``checkpoint``; :class:`ZooError` if it is missing or unreadable."""
+    path = metadata_path(Path(checkpoint))
+    if not path.is_file():
+        raise ZooError(f"{checkpoint}: no metadata file {path.name} beside it (is this a pecli checkpoint?)")
+    try:
+        return CheckpointMeta.from_dict(json.loads(path.read_text()))
+    except (json.JSONDecodeError, TypeError, OSError) as exc:
+        raise ZooError(f"{path}: damaged metadata ({exc})") from None
+
+
+def versions() -> dict[str, str]:
+    """Versions of what a checkpoint depends on."""
+    import numpy
+    import stable_baselines3
+    import torch
+
+    return {
+        "pecli": __version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "numpy": numpy.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def command_line() -> str:
+    """The command that is running, quoted so that it can be pasted back into a shell."""
+    return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])
+
+
+class Run:
+    """One training run in a zoo: ``zoo/<name>/``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.name = path.name
+
+    @classmethod
+    def create(cls, zoo: Path, name: str, scenario: Scenario) -> Run:
+        """Make a new run folder; :class:`ZooError` if one of that name exists."""
+        path = zoo / name
+        if path.exists():
+            raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
+        path.mkdir(parents=True)
+        run = cls(path)
+        atomic_write_text(path / "config.yaml", yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
+        atomic_write_json(path / "versions.json", versions())
+        run.log_command()
+        return run
+
+    @classmethod
+    def open(cls, zoo: Path, name: str) -> Run:
+        path = zoo / name
+        if not (path / "config.yaml").is_file():
+            raise ZooError(f"no run '{name}' in {zoo} to resume")
+        return cls(path)
+
+    def scenario(self) -> Scenario:
+        """The resolved scenario the run was started with."""
+        source = self.path / "config.yaml"
+        return scenario_from_dict(yaml.safe_load(source.read_text()), source=str(source))
+
+    def log_command(self) -> None:
+        """Append the current command to ``command.txt``."""
+        previous = (self.path / "command.txt").read_text() if (self.path / "command.txt").exists() else ""
+        atomic_write_text(self.path / "command.txt", previous + command_line() + "\n")
+
+    def role_dir(self, role: Role) -> Path:
+        directory = self.path / role
+        directory.mkdir(exist_ok=True)
+        return directory
+
+    def checkpoint(self, role: Role, name: str) -> Path:
+        """Path of the checkpoint ``name`` (``ep0000250``, ``final``, ``last``) of ``role``."""
+        return self.role_dir(role) / f"{name}.zip"
+
+    @staticmethod
+    def episode_name(episodes: int) -> str:
+        return f"ep{episodes:07d}"
+
+    def save(self, model: Any, role: Role, name: str, meta: CheckpointMeta) -> Path:
+        """Write ``model`` (an SB3 algorithm) and its metadata atomically; returns the checkpoint path."""
+        path = self.checkpoint(role, name)
+        with atomic_path(path) as tmp:
+            model.save(tmp)
+        atomic_write_json(metadata_path(path), meta.to_dict())
+        return path
+
+    def save_replay_buffer(self, model: Any, role: Role) -> Path:
+        path = self.role_dir(role) / REPLAY_BUFFER
+        with atomic_path(path) as tmp:
+            model.save_replay_buffer(tmp)
+        return path

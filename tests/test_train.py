@@ -1,0 +1,162 @@
+"""End to end with a tiny budget: train, checkpoint, reload, play; resume; Ctrl-C; curriculum; errors."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.errors import PolicyError
+from pecli.policies import resolve_policy
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats
+from pecli.scenario import Scenario
+
+runner = CliRunner()
+TINY = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
+        "--set", "net_arch=[32, 32]", "--set", "checkpoint_every=3", "--set", "n_envs=4"]
+
+
+def invoke(args: list[str]):
+    """Run the CLI with ``sys.argv`` as a shell would set it (the zoo records the command)."""
+    with mock.patch.object(sys, "argv", ["pecli", *args]):
+        return runner.invoke(app, args)
+
+
+def train(zoo: Path, *extra: str):
+    return invoke(["train", "pursuer", "-c", "quick", "--zoo", str(zoo), "--name", "run", "-q", *TINY, *extra])
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> Path:
+    zoo = tmp_path_factory.mktemp("zoo")
+    result = train(zoo, "--steps", "1200")
+    assert result.exit_code == 0, result.output
+    return zoo
+
+
+def test_a_run_writes_the_zoo_layout(trained: Path) -> None:
+    run = trained / "run"
+    for name in ("config.yaml", "command.txt", "versions.json"):
+        assert (run / name).is_file(), name
+    assert "pecli" in json.loads((run / "versions.json").read_text())
+    assert "train pursuer" in (run / "command.txt").read_text()
+    role = run / "pursuer"
+    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
+    periodic = sorted(role.glob("ep*.zip"))
+    assert periodic, "expected checkpoints every 3 episodes"
+    meta = json.loads((role / "final.json").read_text())
+    assert meta["role"] == "pursuer" and meta["steps"] == 1200 and meta["algo"] == "td3"
+    assert meta["opponent"] == "greedy" and meta["belief"] == "none" and meta["episodes"] >= 3
+    first = json.loads(periodic[0].with_suffix(".json").read_text())
+    assert first["episodes"] >= 3 and first["steps"] < 1200
+    assert not [p for p in role.iterdir() if p.name.startswith(".")]  # no temporaries left
+
+
+def test_a_checkpoint_plays_as_a_policy(trained: Path, quick: Scenario) -> None:
+    final = trained / "run" / "pursuer" / "final.zip"
+    result = runner.invoke(app, ["play", "-p", str(final), "-c", "quick", "-n", "20", "--json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["episodes"] == 20
+    policy = resolve_policy(str(final), "pursuer", quick)
+    policy.reset(3)
+    actions = policy.act(np.zeros((3, 11), dtype=np.float32))
+    assert actions.shape == (3, 2) and np.all(np.abs(actions) <= 1)
+
+
+def test_a_checkpoint_refuses_another_scenario_or_role(trained: Path, paper: Scenario, quick: Scenario) -> None:
+    final = str(trained / "run" / "pursuer" / "final.zip")
+    with pytest.raises(PolicyError, match="trained on scenario 'quick'"):
+        resolve_policy(final, "pursuer", paper)
+    with pytest.raises(PolicyError, match="is a pursuer checkpoint; it cannot play evader"):
+        resolve_policy(final, "evader", quick)
+
+
+def test_damaged_checkpoints_give_clear_errors(trained: Path, tmp_path: Path, quick: Scenario) -> None:
+    source = trained / "run" / "pursuer" / "final.zip"
+    truncated = tmp_path / "truncated.zip"
+    truncated.write_bytes(source.read_bytes()[:500])
+    truncated.with_suffix(".json").write_text(source.with_suffix(".json").read_text())
+    with pytest.raises(PolicyError, match="cannot load"):
+        resolve_policy(str(truncated), "pursuer", quick)
+    orphan = tmp_path / "orphan.zip"
+    orphan.write_bytes(source.read_bytes())
+    with pytest.raises(PolicyError, match="no metadata file orphan.json"):
+        resolve_policy(str(orphan), "pursuer", quick)
+    result = runner.invoke(app, ["play", "-p", str(truncated), "-c", "quick"])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+
+
+def test_resume_continues_the_run(trained: Path) -> None:
+    result = invoke(["train", "pursuer", "--zoo", str(trained), "--name", "run", "--resume", "--steps", "1500", "-q"])
+    assert result.exit_code == 0, result.output
+    meta = json.loads((trained / "run" / "pursuer" / "final.json").read_text())
+    assert meta["steps"] == 1500
+    assert (trained / "run" / "command.txt").read_text().count("train pursuer") == 2
+
+
+def test_an_existing_run_needs_resume(trained: Path) -> None:
+    result = train(trained, "--steps", "200")
+    assert result.exit_code == 1 and "already exists" in result.output
+    missing = runner.invoke(app, ["train", "pursuer", "--zoo", str(trained), "--name", "nope", "--resume"])
+    assert missing.exit_code == 1 and "no run 'nope'" in missing.output
+
+
+def test_ctrl_c_saves_a_resumable_checkpoint(tmp_path: Path, monkeypatch) -> None:
+    calls = {"n": 0}
+    original = EpisodeStats._on_step
+
+    def interrupt(self) -> bool:
+        calls["n"] += 1
+        if calls["n"] == 150:
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(EpisodeStats, "_on_step", interrupt)
+    result = train(tmp_path, "--steps", "5000")
+    assert result.exit_code == 130
+    assert "--resume --name run" in result.output
+    role = tmp_path / "run" / "pursuer"
+    assert (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
+    assert 0 < json.loads((role / "last.json").read_text())["steps"] < 5000
+
+
+def test_bad_settings_are_refused(tmp_path: Path) -> None:
+    result = train(tmp_path, "--set", "batch_size=-3")
+    assert result.exit_code == 1 and "batch_size" in result.output
+    result = train(tmp_path, "--set", "nonsense")
+    assert result.exit_code == 1 and "KEY=VALUE" in result.output
+    result = runner.invoke(app, ["train", "pursuer", "--opponent", "pure-pursuit", "--zoo", str(tmp_path), "-q"])
+    assert result.exit_code == 1 and "plays pursuer, not evader" in result.output
+
+
+class _FakeModel:
+    """Just enough of an SB3 model for a callback: an env that records calls, and a logger."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple] = []
+        self.logger = type("Logger", (), {"record": lambda *args, **kwargs: None})()
+
+    def get_env(self):
+        return self
+
+    def env_method(self, name: str, *args):
+        self.calls.append((name, *args))
+
+
+def test_curriculum_schedule(paper: Scenario) -> None:
+    callback = CurriculumCallback(paper, total_steps=1000, fraction=0.3)
+    env = callback.model = _FakeModel()  # type: ignore[assignment]
+    for steps, fov, scale in ((0, 2 * math.pi, 0.0), (150, (2 * math.pi + 2 * math.pi / 3) / 2, 0.5), (300, 2 * math.pi / 3, 1.0),
+                              (900, 2 * math.pi / 3, 1.0)):
+        callback.num_timesteps = steps
+        callback._apply()
+        name, got_fov, got_scale = env.calls[-1]
+        assert name == "set_curriculum"
+        assert got_fov == pytest.approx(fov) and got_scale == pytest.approx(scale)

@@ -17,9 +17,17 @@ $(STAMP): $(PY) pyproject.toml
 
 install: $(STAMP)
 
+DEMO_ZOO := runs/demo-zoo
+
+# Train a pursuer on the small scenario against the greedy evader (a few CPU-minutes),
+# then play the result against greedy and draw one episode.
 demo: install
-	$(VENV)/bin/pecli play --pursuer pure-pursuit --evader greedy --config configs/quick.yaml \
-		--episodes 200 --seed 0 --render runs/demo.gif
+	rm -rf $(DEMO_ZOO)/demo
+	$(VENV)/bin/pecli train pursuer --config configs/quick.yaml --opponent greedy --zoo $(DEMO_ZOO) --name demo
+	$(VENV)/bin/pecli play --pursuer $(DEMO_ZOO)/demo/pursuer/final.zip --evader greedy --config configs/quick.yaml \
+		--episodes 500 --seed 0
+	$(VENV)/bin/pecli play --pursuer $(DEMO_ZOO)/demo/pursuer/final.zip --evader greedy --config configs/quick.yaml \
+		--episodes 1 --seed 1 --render runs/demo.gif
 
 test: install
 	$(PY) -m pytest -q

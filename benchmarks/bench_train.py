@@ -1,0 +1,195 @@
+"""Training speed and learning quality of ``pecli train``.
+
+    python benchmarks/bench_train.py speed                  # env-steps/s: pecli train vs plain SB3, one run
+    python benchmarks/bench_train.py curves --minutes 10    # capture rate vs greedy over CPU time, 3 seeds
+    python benchmarks/bench_train.py report                 # table + plot from finished curve runs
+
+``speed`` trains the pursuer on the paper scenario twice with the same hyperparameters (8 envs,
+2 gradient steps per vector step, batch 512, one torch thread): once through pecli's batched
+frozen-opponent view with the centralised critic, once as plain SB3 TD3 ``MlpPolicy`` on the
+same game through ``DummyVecEnv`` of single-game envs (the learner's observation only). It
+reports learner transitions per second of each and their ratio, median of ``--repeats``.
+
+``curves`` runs ``pecli train pursuer`` for each seed with an evaluation against the greedy
+evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
+``--minutes`` of CPU time; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
+writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
+interpolates every seed's curve on a common CPU-time grid, prints the median capture rate at
+10 and 30 CPU-minutes, and draws ``docs/learning_curves.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CURVES = ROOT / "runs" / "bench_train"
+
+
+def speed(args: argparse.Namespace) -> None:
+    import torch as th
+    from gymnasium.wrappers import FilterObservation, FlattenObservation
+    from stable_baselines3 import TD3
+    from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from pecli.policies import resolve_policy
+    from pecli.rl.train import TrainJob, make_model
+    from pecli.scenario import load_scenario
+    from wrappers.frozen_opponent import FrozenOpponentEnv, FrozenOpponentVecEnv
+
+    th.set_num_threads(1)
+    scenario = load_scenario(args.config)
+    t = scenario.training
+    steps = args.steps
+
+    def ours() -> float:
+        env = FrozenOpponentVecEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario), n=t.n_envs)
+        job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench")
+        model = make_model(job, env, tensorboard=None)
+        model.learning_starts = 1000
+        start = time.perf_counter()
+        model.learn(steps)
+        return steps / (time.perf_counter() - start)
+
+    def plain() -> float:
+        def make():
+            env = FrozenOpponentEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario))
+            return FlattenObservation(FilterObservation(env, ["obs"]))
+
+        env = DummyVecEnv([make] * t.n_envs)
+        model = TD3(
+            "MlpPolicy", env, learning_rate=t.learning_rate, buffer_size=t.buffer_size, learning_starts=1000,
+            batch_size=t.batch_size, tau=t.tau, gamma=t.gamma, train_freq=(t.train_freq, "step"),
+            gradient_steps=t.gradient_steps, action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
+            policy_kwargs={"net_arch": list(t.net_arch)}, device="cpu", verbose=0,
+        )
+        start = time.perf_counter()
+        model.learn(steps)
+        return steps / (time.perf_counter() - start)
+
+    results: dict[str, list[float]] = {"pecli train": [], "SB3 TD3 MlpPolicy + DummyVecEnv": []}
+    for _ in range(args.repeats):
+        results["pecli train"].append(ours())
+        results["SB3 TD3 MlpPolicy + DummyVecEnv"].append(plain())
+    reference = statistics.median(results["SB3 TD3 MlpPolicy + DummyVecEnv"])
+    print(f"{scenario.name}: {steps} transitions, {t.n_envs} envs, {t.gradient_steps} gradient steps per vector step, "
+          f"batch {t.batch_size}, 1 torch thread, median of {args.repeats}")
+    print("| trainer | transitions/s | ratio |")
+    print("| --- | ---: | ---: |")
+    for name, rates in results.items():
+        rate = statistics.median(rates)
+        print(f"| {name} | {rate:,.0f} | {rate / reference:.2f}x |")
+
+
+def curves(args: argparse.Namespace) -> None:
+    """Start the curve runs, ``--jobs`` at a time, each stopped after ``--minutes`` of CPU time."""
+    pending = list(args.seeds)
+    running: list[tuple[int, subprocess.Popen]] = []
+    CURVES.mkdir(parents=True, exist_ok=True)
+    while pending or running:
+        while pending and len(running) < args.jobs:
+            seed = pending.pop(0)
+            name = f"{args.config}-s{seed}"
+            command = [
+                sys.executable, "-m", "pecli", "train", "pursuer", "-c", args.config, "--zoo", str(CURVES),
+                "--name", name, "--seed", str(seed), "--steps", str(args.max_steps), "-q",
+                "--set", f"eval_every={args.eval_every}", *sum((["--set", s] for s in args.set), []),
+            ]
+            print("started:", " ".join(command[1:]), flush=True)
+            running.append((seed, subprocess.Popen(command, cwd=ROOT)))
+        time.sleep(5)
+        for seed, process in list(running):
+            csv_path = CURVES / f"{args.config}-s{seed}" / "eval_pursuer.csv"
+            used = _last_cpu_seconds(csv_path)
+            if process.poll() is not None or used >= 60 * args.minutes:
+                if process.poll() is None:
+                    process.terminate()  # the run has had its CPU budget
+                    process.wait()
+                print(f"seed {seed}: stopped at {used / 60:.1f} CPU-minutes", flush=True)
+                running.remove((seed, process))
+
+
+def _read(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    with csv_path.open() as handle:
+        rows = list(csv.DictReader(handle))
+    cpu = np.array([float(r["cpu_seconds"]) for r in rows]) / 60
+    rate = np.array([float(r["capture_rate"]) for r in rows])
+    return cpu, rate
+
+
+def _last_cpu_seconds(csv_path: Path) -> float:
+    if not csv_path.is_file():
+        return 0.0
+    cpu, _ = _read(csv_path)
+    return float(cpu[-1] * 60) if cpu.size else 0.0
+
+
+def report(args: argparse.Namespace) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = sorted(CURVES.glob(f"{args.config}-s*/eval_pursuer.csv"))
+    if not runs:
+        sys.exit(f"no curve runs in {CURVES}: run the 'curves' step first")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    at: dict[float, list[float]] = {10.0: [], 30.0: []}
+    for path in runs:
+        cpu, rate = _read(path)
+        ax.plot(cpu, rate, marker=".", label=path.parent.name)
+        for minutes in at:
+            if cpu.size and cpu[-1] >= minutes:
+                at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best checkpoint so far
+    ax.axhline(0.9, color="0.6", ls="--", lw=0.8)
+    ax.set_xlabel("CPU minutes (one torch thread)")
+    ax.set_ylabel("capture rate vs greedy (200 episodes)")
+    ax.set_ylim(0, 1)
+    ax.set_title(f"pecli train pursuer, {args.config}")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out = ROOT / "docs" / "learning_curves.png"
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
+    for minutes, values in at.items():
+        shown = ", ".join(f"{v:.2f}" for v in values) or "no run got that far"
+        median = f"{statistics.median(values):.2f}" if values else "-"
+        print(f"best capture rate within {minutes:.0f} CPU-min: median {median} ({shown})")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="step", required=True)
+    s = sub.add_parser("speed")
+    s.add_argument("--config", default="paper")
+    s.add_argument("--steps", type=int, default=6000)
+    s.add_argument("--repeats", type=int, default=3)
+    c = sub.add_parser("curves")
+    c.add_argument("--config", default="paper")
+    c.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    c.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per seed")
+    c.add_argument("--jobs", type=int, default=2)
+    c.add_argument("--eval-every", type=int, default=20000)
+    c.add_argument("--max-steps", type=int, default=3_000_000)
+    c.add_argument("--set", action="append", default=["curriculum.enabled=false"],
+                   help="extra training settings (default: curriculum off, see docs/benchmarks.md)")
+    r = sub.add_parser("report")
+    r.add_argument("--config", default="paper")
+    args = parser.parse_args()
+    {"speed": speed, "curves": curves, "report": report}[args.step](args)
+
+
+if __name__ == "__main__":
+    main()

@@ -10,9 +10,10 @@ frozen-opponent view with the centralised critic, once as plain SB3 TD3 ``MlpPol
 same game through ``DummyVecEnv`` of single-game envs (the learner's observation only). It
 reports learner transitions per second of each and their ratio, median of ``--repeats``.
 
-``curves`` runs ``pecli train pursuer`` for each seed with an evaluation against the greedy
-evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
-``--minutes`` of CPU time; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
+``curves`` runs ``pecli train pursuer`` for each seed with a budget of ``--max-steps``
+transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluation against the
+greedy evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
+``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
 interpolates every seed's curve on a common CPU-time grid, prints the median capture rate at
 10 and 30 CPU-minutes, and draws ``docs/learning_curves.png``.
@@ -181,10 +182,10 @@ def main() -> None:
     c.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     c.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per seed")
     c.add_argument("--jobs", type=int, default=2)
-    c.add_argument("--eval-every", type=int, default=20000)
-    c.add_argument("--max-steps", type=int, default=3_000_000)
-    c.add_argument("--set", action="append", default=["curriculum.enabled=false"],
-                   help="extra training settings (default: curriculum off, see docs/benchmarks.md)")
+    c.add_argument("--eval-every", type=int, default=25000)
+    c.add_argument("--max-steps", type=int, default=600_000,
+                   help="the training budget; the curriculum spans its first 30 %% (paper.yaml)")
+    c.add_argument("--set", action="append", default=[], help="extra training settings, KEY=VALUE")
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")
     args = parser.parse_args()

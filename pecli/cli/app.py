@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from pecli import __version__
-from pecli.cli import config, play, train
+from pecli.cli import config, play, tournament, train
 
 app = typer.Typer(
     name="pecli",
@@ -39,6 +39,7 @@ def _root(
 
 
 app.command(name="play", rich_help_panel="Play and evaluate")(play.play)
+app.command(name="tournament", rich_help_panel="Play and evaluate")(tournament.tournament)
 app.command(name="train", rich_help_panel="Learn")(train.train)
 app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
 

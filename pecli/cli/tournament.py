@@ -1,0 +1,114 @@
+"""``pecli tournament``: pursuers against evaders, the paper's metrics, significance and ratings."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from pecli.cli.common import console, err_console, require_positive, user_errors
+from pecli.errors import PecliError
+from pecli.scenario import Scenario, load_scenario
+
+
+def _scenario_for(paths: list[str], config: str | None) -> Scenario:
+    """The ``--config`` scenario, else the one the first run folder found under ``paths`` was trained on."""
+    from pecli.zoo import Run
+
+    if config is not None:
+        return load_scenario(config)
+    for entry in paths:
+        path = Path(entry)
+        folders = [path] if path.is_dir() else [path.parent.parent] if path.is_file() else []
+        for folder in folders:
+            runs = [folder] if (folder / "config.yaml").is_file() else sorted(
+                p.parent for p in folder.rglob("config.yaml")
+            )
+            if runs:
+                return Run(runs[0]).scenario()
+    return load_scenario("paper")
+
+
+@user_errors
+def tournament(
+    paths: Annotated[
+        list[str] | None,
+        typer.Argument(help="Zoo folders, run folders, checkpoint files or module:Class policies.", show_default=False),
+    ] = None,
+    config: Annotated[
+        str | None,
+        typer.Option("--config", "-c", help="Scenario (default: the one the first run found was trained on)."),
+    ] = None,
+    baselines: Annotated[bool, typer.Option("--baselines", help="Add the built-in heuristics of both sides.")] = False,
+    episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes per seed and pairing.")] = 500,
+    seeds: Annotated[int, typer.Option("--seeds", help="Seeds per pairing (0 .. K-1).")] = 3,
+    sample: Annotated[
+        int | None,
+        typer.Option("--sample", help="Each checkpoint against M random opponents (the paper uses 32) instead of the grid."),
+    ] = None,
+    workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing pairings.")] = min(2, os.cpu_count() or 1),
+    out: Annotated[Path, typer.Option("--out", help="Folder for results, reports and the pairing cache.")] = Path(
+        "runs/tournament"
+    ),
+    as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Reuse the pairings already played in --out.")] = False,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the --sample draw.")] = 0,
+) -> None:
+    """Play pursuers against evaders and report capture rate and time-to-capture per pairing.
+
+    Every pairing plays [bold]--episodes[/] games per seed as one batch, from the same start states
+    for every pairing. The table follows the paper's Table I (bold: best against that evader, or
+    tied with it by a two-proportion z-test); ratings put every player on one Bradley–Terry scale.
+    Results go to [bold]--out[/]: results.json, results.csv, capture_rates.png and a cache that
+    [bold]--resume[/] reuses.
+    """
+    from pecli.reports import ratings_table, results_table, write_reports
+    from pecli.tournament import find_players, run_tournament, schedule
+
+    require_positive(episodes, "--episodes")
+    require_positive(seeds, "--seeds")
+    require_positive(workers, "--workers")
+    paths = paths or []
+    if not paths and not baselines:
+        raise PecliError("nothing to play: give zoo folders or checkpoints, and/or --baselines")
+    cache = out / "pairings"
+    if cache.is_dir() and any(cache.iterdir()) and not resume:
+        raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, or another --out")
+    scenario = _scenario_for(paths, config)
+    found = find_players(paths, scenario, baselines=baselines)
+    for reason in found.skipped:
+        err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)
+    pairings = schedule(found.players, sample=sample, seed=seed)
+    counts = {role: len(players) for role, players in found.players.items()}
+    err_console.print(
+        f"{counts['pursuer']} pursuers × {counts['evader']} evaders on {scenario.name}: {len(pairings)} pairings "
+        f"of {episodes} × {seeds} episodes, {workers} worker{'s' if workers > 1 else ''}",
+        highlight=False,
+    )
+
+    with Progress(
+        TextColumn("[bold]pairings"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
+        TimeElapsedColumn(), TimeRemainingColumn(), console=err_console, transient=True,
+        disable=as_json or not err_console.is_terminal,
+    ) as progress:
+        task = progress.add_task("pairings", total=len(pairings), last="")
+
+        def report(result, cached: bool) -> None:
+            note = " (cached)" if cached else ""
+            progress.update(task, advance=1, last=f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
+
+        results = run_tournament(
+            scenario, found.players, pairings, episodes, list(range(seeds)), out, workers=workers, on_result=report
+        )
+    written = write_reports(results, out)
+    if as_json:
+        typer.echo(json.dumps(results.to_json(), indent=2))
+        return
+    if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
+        console.print(results_table(results))
+    console.print(ratings_table(results, limit=40))
+    err_console.print("wrote " + ", ".join(str(p) for p in written), highlight=False)

@@ -1,0 +1,109 @@
+"""Tournament reports: the paper's Table I layout, ratings, CSV/JSON files and a capture-rate heatmap."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+from rich.table import Table
+
+from pecli.io import atomic_path, atomic_write_json
+from pecli.tournament import TournamentResults
+
+
+def results_table(results: TournamentResults) -> Table:
+    """Evaders as rows, pursuers as columns, cells 'time (σ=std) / rate' as in the paper's Table I.
+
+    Bold marks the best pursuer against each evader and those that tie with it (z-test, p > 0.05).
+    """
+    grid, best = results.grid(), results.best_in_row()
+    pursuers = [p.name for p in results.players["pursuer"]]
+    evaders = [e.name for e in results.players["evader"]]
+    table = Table(
+        title=f"{results.scenario.name}: capture time (σ) / capture rate, "
+        f"{results.episodes} episodes × {len(results.seeds)} seeds per pairing",
+        caption="bold: the best pursuer against that evader, or tied with it (two-proportion z-test, p > 0.05)",
+    )
+    table.add_column("evader \\ pursuer", style="bold")
+    for name in pursuers:
+        table.add_column(name, justify="center", overflow="fold")
+    for evader in evaders:
+        cells = []
+        for pursuer in pursuers:
+            r = grid.get((pursuer, evader))
+            if r is None:
+                cells.append("[dim]-[/]")
+                continue
+            text = f"{r.time_to_capture_mean:.2f} (σ={r.time_to_capture_std:.2f}) / {r.capture_rate:.2f}"
+            cells.append(f"[bold]{text}[/]" if (pursuer, evader) in best else text)
+        table.add_row(evader, *cells)
+    return table
+
+
+def ratings_table(results: TournamentResults, limit: int | None = None) -> Table:
+    """Players ranked by Bradley–Terry rating (Elo scale) with the mean capture rate of their pairings."""
+    table = Table(title="ratings (Bradley–Terry, Elo scale; pursuers and evaders on one scale)")
+    for column, justify in (("#", "right"), ("player", "left"), ("role", "left"), ("rating", "right"),
+                            ("± se", "right"), ("capture rate", "right"), ("episodes", "right")):
+        table.add_column(column, justify=justify, overflow="fold")
+    roles = {p.name: role for role, players in results.players.items() for p in players}
+    for rank, rating in enumerate(results.ratings[:limit], start=1):
+        own = [r for r in results.pairings if rating.name in (r.pursuer, r.evader)]
+        captures = sum(r.captures for r in own) / max(1, sum(r.episodes for r in own))
+        table.add_row(str(rank), rating.name, roles[rating.name], f"{rating.elo:.0f}", f"{rating.stderr:.0f}",
+                      f"{captures:.3f}", str(rating.games))
+    return table
+
+
+def write_reports(results: TournamentResults, out: Path) -> list[Path]:
+    """Write ``results.json``, ``results.csv`` and ``capture_rates.png`` into ``out``; returns their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    data = results.to_json()
+    atomic_write_json(out / "results.json", data)
+    with atomic_path(out / "results.csv") as tmp, tmp.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["pursuer", "evader", "episodes", "captures", "capture_rate",
+                         "time_to_capture_mean", "time_to_capture_std", "best_in_row"])
+        for row in data["pairings"]:
+            writer.writerow([row["pursuer"], row["evader"], row["episodes"], row["captures"],
+                             f"{row['capture_rate']:.4f}", f"{row['time_to_capture_mean']:.4f}",
+                             f"{row['time_to_capture_std']:.4f}", row["best_in_row"]])
+    return [out / "results.json", out / "results.csv", heatmap(results, out / "capture_rates.png")]
+
+
+def heatmap(results: TournamentResults, path: Path) -> Path:
+    """Capture rates as a heatmap: evaders as rows, pursuers as columns (blank: not played)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    grid = results.grid()
+    pursuers = [p.name for p in results.players["pursuer"]]
+    evaders = [e.name for e in results.players["evader"]]
+    rates = np.full((len(evaders), len(pursuers)), np.nan)
+    for i, evader in enumerate(evaders):
+        for j, pursuer in enumerate(pursuers):
+            if (pursuer, evader) in grid:
+                rates[i, j] = grid[(pursuer, evader)].capture_rate
+    width = min(2 + 0.6 * len(pursuers), 30)
+    height = min(1.5 + 0.4 * len(evaders), 30)
+    fig, ax = plt.subplots(figsize=(width, height))
+    image = ax.imshow(rates, vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
+    ax.set_xticks(range(len(pursuers)), pursuers, rotation=60, ha="right", fontsize=7)
+    ax.set_yticks(range(len(evaders)), evaders, fontsize=7)
+    ax.set_xlabel("pursuer")
+    ax.set_ylabel("evader")
+    if len(pursuers) * len(evaders) <= 400:
+        for (i, j), value in np.ndenumerate(rates):
+            if not np.isnan(value):
+                ax.text(j, i, f"{value:.2f}", ha="center", va="center", fontsize=6,
+                        color="black" if value > 0.6 else "white")
+    fig.colorbar(image, ax=ax, label="capture rate")
+    ax.set_title(f"{results.scenario.name}: capture rate", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path

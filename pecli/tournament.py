@@ -1,0 +1,309 @@
+"""Tournaments: every pursuer against every evader (or a random sample), as batched matches.
+
+    players = find_players(["zoo/"], scenario, baselines=True)
+    pairings = schedule(players, sample=None)
+    results = run_tournament(scenario, pairings, episodes=500, seeds=[0, 1, 2], out=Path("runs/tournament"))
+
+Each pairing plays ``episodes`` games per seed as one batch (:func:`pecli.match.play_match`). Game
+``i`` under seed ``s`` starts from the same state in every pairing, so the comparison is paired.
+Finished pairings are cached as JSON in ``out/pairings/``: an interrupted tournament resumes,
+and a grown zoo only plays its new pairings.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import random
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from pecli.errors import PecliError
+from pecli.io import atomic_write_json
+from pecli.match import play_match
+from pecli.policies import resolve_policy
+from pecli.policies.registry import BUILTINS
+from pecli.roles import ROLES, Role
+from pecli.scenario import Scenario
+from pecli.stats import Rating, bradley_terry, ties_with_best
+from pecli.zoo import LAST, ZooError, read_metadata
+
+BASELINES: dict[Role, tuple[str, ...]] = {
+    "pursuer": ("pure-pursuit",),
+    "evader": ("random-walk", "greedy", "rash"),
+}
+
+
+@dataclass(frozen=True)
+class Player:
+    """One entrant: how to build it (``spec``), what to call it, and what identifies it for the cache."""
+
+    name: str
+    spec: str
+    role: Role
+    identity: str  # built-in name, class path, or the checkpoint file's content hash
+
+
+@dataclass(frozen=True)
+class PairingResult:
+    """Outcome of one pursuer against one evader over all seeds."""
+
+    pursuer: str
+    evader: str
+    episodes: int
+    captures: int
+    time_to_capture_mean: float
+    time_to_capture_std: float  # population std over all episodes (a timeout counts 1.0)
+
+    @property
+    def capture_rate(self) -> float:
+        return self.captures / self.episodes
+
+
+@dataclass
+class Discovery:
+    """Players found under some paths, and what was passed over (with the reason)."""
+
+    players: dict[Role, list[Player]]
+    skipped: list[str]
+
+
+def _file_hash(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:20]
+
+
+def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
+    try:
+        meta = read_metadata(path)
+    except ZooError as exc:
+        skipped.append(str(exc))
+        return None
+    if meta.scenario_hash != scenario.fingerprint():
+        skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")
+        return None
+    name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else str(path.with_suffix(""))
+    return Player(name=name, spec=str(path), role=meta.role, identity=_file_hash(path))
+
+
+def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:
+    """Players from zoo folders, run folders, checkpoint files and ``module:Class`` strings.
+
+    A folder contributes every checkpoint with metadata below it, except ``last`` (the resume copy
+    of a run). Checkpoints of another scenario, and files without metadata, are skipped and listed.
+    """
+    players: dict[Role, list[Player]] = {role: [] for role in ROLES}
+    skipped: list[str] = []
+    if baselines:
+        for role, names in BASELINES.items():
+            players[role] += [Player(name=n, spec=n, role=role, identity=f"builtin:{n}") for n in names]
+    for entry in paths:
+        path = Path(entry)
+        if path.is_dir():
+            found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST]
+            if not found:
+                raise PecliError(f"no checkpoints under {entry}")
+            candidates = [_checkpoint_player(p, scenario, skipped) for p in found]
+        elif path.is_file():
+            candidates = [_checkpoint_player(path, scenario, skipped)]
+            if candidates[0] is None:
+                raise PecliError(skipped[-1])
+        elif ":" in entry or entry in BUILTINS:
+            candidates = [_class_player(entry, scenario)]
+        else:
+            raise PecliError(f"no such file or folder: {entry}")
+        for player in candidates:
+            if player is not None and player.identity not in {p.identity for p in players[player.role]}:
+                players[player.role].append(player)
+    for role in ROLES:
+        if not players[role]:
+            hint = "" if baselines else " (add --baselines to include the built-in heuristics)"
+            raise PecliError(f"no {role} to play: the tournament needs at least one of each side{hint}")
+    return Discovery(players=players, skipped=skipped)
+
+
+def _class_player(spec: str, scenario: Scenario) -> Player:
+    if spec in BUILTINS:
+        roles = BUILTINS[spec].roles
+        return Player(name=spec, spec=spec, role=roles[0], identity=f"builtin:{spec}")
+    for role in ROLES:
+        try:
+            resolve_policy(spec, role, scenario)
+        except PecliError as exc:
+            if "plays" in str(exc):
+                continue
+            raise
+        return Player(name=spec, spec=spec, role=role, identity=f"class:{spec}")
+    raise PecliError(f"'{spec}' plays neither role")
+
+
+def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed: int = 0) -> list[tuple[Player, Player]]:
+    """Pairings ``(pursuer, evader)``: the full grid, or each checkpoint against ``sample`` random opponents.
+
+    With ``sample`` (the paper's ranking, 32 there) every learned player meets ``sample`` players of
+    the other side drawn without replacement (all of them if there are fewer); built-in and class
+    players are only drawn as opponents.
+    """
+    pursuers, evaders = players["pursuer"], players["evader"]
+    if sample is None:
+        return [(p, e) for e in evaders for p in pursuers]
+    if sample < 1:
+        raise PecliError("--sample must be at least 1")
+    rng = random.Random(seed)
+    chosen: set[tuple[str, str]] = set()
+    for role, own, other in (("pursuer", pursuers, evaders), ("evader", evaders, pursuers)):
+        for player in own:
+            if player.identity.startswith(("builtin:", "class:")):
+                continue
+            for opponent in rng.sample(other, min(sample, len(other))):
+                pair = (player, opponent) if role == "pursuer" else (opponent, player)
+                chosen.add((pair[0].identity, pair[1].identity))
+    return [(p, e) for e in evaders for p in pursuers if (p.identity, e.identity) in chosen]
+
+
+def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> str:
+    """Cache key of a pairing: everything that decides its outcome."""
+    text = json.dumps([scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def play_pairing(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> PairingResult:
+    """Play ``episodes`` batched games per seed; both policies act on the whole batch."""
+    import numpy as np
+
+    captured, times = [], []
+    for seed in seeds:
+        p = resolve_policy(pursuer.spec, "pursuer", scenario, seed=seed)
+        e = resolve_policy(evader.spec, "evader", scenario, seed=seed)
+        result, _ = play_match(scenario, p, e, episodes=episodes, seed=seed)
+        captured.append(result.captured)
+        times.append(result.time_to_capture)
+    all_captured, all_times = np.concatenate(captured), np.concatenate(times)
+    return PairingResult(
+        pursuer=pursuer.name,
+        evader=evader.name,
+        episodes=int(all_captured.size),
+        captures=int(all_captured.sum()),
+        time_to_capture_mean=float(all_times.mean()),
+        time_to_capture_std=float(all_times.std()),
+    )
+
+
+def _worker_init() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _play_job(job: tuple[Scenario, Player, Player, int, list[int]]) -> PairingResult:
+    return play_pairing(*job)
+
+
+@dataclass
+class TournamentResults:
+    """Everything a tournament produced: pairings, ratings, the players and the settings."""
+
+    scenario: Scenario
+    players: dict[Role, list[Player]]
+    pairings: list[PairingResult]
+    ratings: list[Rating]
+    episodes: int
+    seeds: list[int]
+
+    def grid(self) -> dict[tuple[str, str], PairingResult]:
+        return {(r.pursuer, r.evader): r for r in self.pairings}
+
+    def best_in_row(self) -> set[tuple[str, str]]:
+        """Pairings whose pursuer is the best against that evader or ties with it (z-test, p > 0.05)."""
+        marked: set[tuple[str, str]] = set()
+        by_evader: dict[str, list[PairingResult]] = {}
+        for result in self.pairings:
+            by_evader.setdefault(result.evader, []).append(result)
+        for row in by_evader.values():
+            ties = ties_with_best([r.captures for r in row], [r.episodes for r in row])
+            marked |= {(r.pursuer, r.evader) for r, tie in zip(row, ties) if tie}
+        return marked
+
+    def to_json(self) -> dict[str, Any]:
+        best = self.best_in_row()
+        paths = {p.name: p.spec for role in ROLES for p in self.players[role]}
+        return {
+            "scenario": self.scenario.name,
+            "scenario_hash": self.scenario.fingerprint(),
+            "episodes_per_seed": self.episodes,
+            "seeds": self.seeds,
+            "pairings": [
+                {**asdict(r), "capture_rate": r.capture_rate, "best_in_row": (r.pursuer, r.evader) in best}
+                for r in self.pairings
+            ],
+            "ratings": [
+                {**asdict(r), "role": _role_of(self.players, r.name), "spec": paths[r.name]} for r in self.ratings
+            ],
+        }
+
+
+def _role_of(players: dict[Role, list[Player]], name: str) -> Role:
+    return "pursuer" if any(p.name == name for p in players["pursuer"]) else "evader"
+
+
+def rate(players: dict[Role, list[Player]], pairings: Sequence[PairingResult]) -> list[Rating]:
+    """Bradley–Terry ratings of every player from all its results (a capture is a pursuer's win)."""
+    names = [p.name for role in ROLES for p in players[role]]
+    index = {name: i for i, name in enumerate(names)}
+    results = [(index[r.pursuer], index[r.evader], r.captures, r.episodes) for r in pairings]
+    return sorted(bradley_terry(names, results), key=lambda r: -r.elo)
+
+
+def run_tournament(
+    scenario: Scenario,
+    players: dict[Role, list[Player]],
+    pairings: Sequence[tuple[Player, Player]],
+    episodes: int,
+    seeds: Sequence[int],
+    out: Path,
+    workers: int = 1,
+    on_result: Callable[[PairingResult, bool], None] | None = None,
+) -> TournamentResults:
+    """Play every pairing not yet cached in ``out/pairings``; ``on_result(result, was_cached)`` reports each."""
+    cache = out / "pairings"
+    cache.mkdir(parents=True, exist_ok=True)
+    results: dict[str, PairingResult] = {}
+    todo: list[tuple[str, tuple]] = []
+    for pursuer, evader in pairings:
+        key = pairing_key(scenario, pursuer, evader, episodes, seeds)
+        cached = cache / f"{key}.json"
+        if cached.is_file():
+            data = json.loads(cached.read_text())
+            result = PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
+            results[key] = result
+            if on_result is not None:
+                on_result(result, True)
+        else:
+            todo.append((key, (scenario, pursuer, evader, episodes, list(seeds))))
+
+    def finish(key: str, result: PairingResult) -> None:
+        atomic_write_json(cache / f"{key}.json", asdict(result))
+        results[key] = result
+        if on_result is not None:
+            on_result(result, False)
+
+    if workers > 1 and len(todo) > 1:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init) as pool:
+            futures = {pool.submit(_play_job, job): key for key, job in todo}
+            for future in as_completed(futures):
+                finish(futures[future], future.result())
+    else:
+        for key, job in todo:
+            finish(key, _play_job(job))
+    ordered = [results[pairing_key(scenario, p, e, episodes, seeds)] for p, e in pairings]
+    return TournamentResults(
+        scenario=scenario, players=players, pairings=ordered, ratings=rate(players, ordered),
+        episodes=episodes, seeds=list(seeds),
+    )

@@ -1,0 +1,51 @@
+"""The z-test, ties with the best, and Bradley–Terry ratings against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pecli.stats import ELO_SCALE, bradley_terry, ties_with_best, two_proportion_z_test
+
+
+def test_z_test_by_hand() -> None:
+    # 0.98 vs 0.94 with 1500 episodes each: pooled 0.96, se = sqrt(.96 * .04 * 2/1500) = 0.0071554
+    z = (0.98 - 0.94) / math.sqrt(0.96 * 0.04 * (2 / 1500))
+    assert z == pytest.approx(5.5902, abs=1e-3)
+    assert two_proportion_z_test(1470, 1500, 1410, 1500) == pytest.approx(math.erfc(z / math.sqrt(2)), rel=1e-9)
+    assert two_proportion_z_test(1470, 1500, 1410, 1500) < 1e-7
+
+
+def test_z_test_edges() -> None:
+    assert two_proportion_z_test(10, 10, 10, 10) == 1.0  # both perfect: cannot differ
+    assert two_proportion_z_test(0, 10, 0, 20) == 1.0
+    assert two_proportion_z_test(50, 100, 50, 100) == pytest.approx(1.0)
+    assert two_proportion_z_test(48, 100, 52, 100) == pytest.approx(0.5716, abs=1e-3)  # z = 0.566
+    with pytest.raises(ValueError):
+        two_proportion_z_test(0, 0, 1, 1)
+
+
+def test_ties_with_best() -> None:
+    # 0.990 vs 0.985 with 1500 each: z = 1.26, p = 0.21, a tie; 0.99 vs 0.98: z = 2.25, p = 0.024, not
+    assert ties_with_best([1485, 1478, 1410], [1500, 1500, 1500]) == [True, True, False]
+    assert ties_with_best([1485, 1470], [1500, 1500]) == [True, False]
+    assert ties_with_best([10, 90], [100, 100], higher_is_better=False) == [True, False]
+
+
+def test_bradley_terry_recovers_a_known_gap() -> None:
+    # player 0 beats player 1 in 75 % of 4000 games: theta0 - theta1 = logit(0.75) = ln 3
+    ratings = bradley_terry(["a", "b"], [(0, 1, 3000, 4000)], prior_sd=100.0)
+    gap = (ratings[0].elo - ratings[1].elo) / ELO_SCALE
+    assert gap == pytest.approx(math.log(3), rel=1e-3)
+    assert ratings[0].elo + ratings[1].elo == pytest.approx(3000.0)  # centred on 1500
+    assert 0 < ratings[0].stderr < 0.1 * ELO_SCALE and ratings[0].games == 4000
+
+
+def test_bradley_terry_orders_transitively_and_stays_finite() -> None:
+    names = ["strong pursuer", "weak pursuer", "evader"]
+    results = [(0, 2, 90, 100), (1, 2, 30, 100)]
+    ratings = {r.name: r for r in bradley_terry(names, results)}
+    assert ratings["strong pursuer"].elo > ratings["evader"].elo > ratings["weak pursuer"].elo
+    perfect = bradley_terry(["p", "e"], [(0, 1, 100, 100)])
+    assert all(math.isfinite(r.elo) and math.isfinite(r.stderr) for r in perfect)

@@ -1,0 +1,102 @@
+"""Tournaments: discovery, pairings, determinism, paired starts, caching/resume, reports, CLI errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.errors import PecliError
+from pecli.scenario import Scenario
+from pecli.tournament import Player, find_players, run_tournament, schedule
+
+runner = CliRunner()
+
+
+def baselines(scenario: Scenario):
+    return find_players([], scenario, baselines=True).players
+
+
+def test_baselines_are_found_by_role(quick: Scenario) -> None:
+    players = baselines(quick)
+    assert [p.name for p in players["pursuer"]] == ["pure-pursuit"]
+    assert [p.name for p in players["evader"]] == ["random-walk", "greedy", "rash"]
+
+
+def test_full_grid_and_sampled_pairings() -> None:
+    def player(name: str, role: str) -> Player:
+        return Player(name=name, spec=name, role=role, identity=f"file:{name}")
+
+    players = {"pursuer": [player(f"p{i}", "pursuer") for i in range(5)],
+               "evader": [player(f"e{i}", "evader") for i in range(6)]}
+    assert len(schedule(players)) == 30
+    sampled = schedule(players, sample=2, seed=1)
+    assert sampled == schedule(players, sample=2, seed=1)  # seeded
+    for p in players["pursuer"]:
+        assert sum(pair[0] == p for pair in sampled) >= 2  # each meets at least its own 2 draws
+    assert len(sampled) < 30
+
+
+def test_deterministic_and_cached(quick: Scenario, tmp_path: Path) -> None:
+    players = baselines(quick)
+    pairings = schedule(players)
+    first = run_tournament(quick, players, pairings, episodes=30, seeds=[0, 1], out=tmp_path / "a")
+    second = run_tournament(quick, players, pairings, episodes=30, seeds=[0, 1], out=tmp_path / "b")
+    assert [r.captures for r in first.pairings] == [r.captures for r in second.pairings]
+    assert first.pairings[0].episodes == 60
+    played: list[bool] = []
+    third = run_tournament(quick, players, pairings, episodes=30, seeds=[0, 1], out=tmp_path / "a",
+                           on_result=lambda result, cached: played.append(cached))
+    assert played == [True, True, True]  # resume skips every done pairing
+    assert [r.captures for r in third.pairings] == [r.captures for r in first.pairings]
+
+
+def test_a_grown_tournament_plays_only_new_pairings(quick: Scenario, tmp_path: Path) -> None:
+    players = baselines(quick)
+    small = {"pursuer": players["pursuer"], "evader": players["evader"][:1]}
+    run_tournament(quick, small, schedule(small), episodes=20, seeds=[0], out=tmp_path)
+    cached: list[bool] = []
+    run_tournament(quick, players, schedule(players), episodes=20, seeds=[0], out=tmp_path,
+                   on_result=lambda result, was_cached: cached.append(was_cached))
+    assert sorted(cached) == [False, False, True]
+
+
+def test_bad_paths_and_empty_zoos(quick: Scenario, tmp_path: Path) -> None:
+    with pytest.raises(PecliError, match="no such file or folder"):
+        find_players([str(tmp_path / "missing")], quick)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PecliError, match="no checkpoints under"):
+        find_players([str(tmp_path / "empty")], quick)
+    with pytest.raises(PecliError, match="no evader to play"):
+        find_players(["pure-pursuit"], quick)
+
+
+def test_cli_reports_and_resume(tmp_path: Path) -> None:
+    out = tmp_path / "t"
+    args = ["tournament", "--baselines", "-c", "quick", "-n", "20", "--seeds", "2", "--out", str(out), "-w", "1"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "greedy" in result.stdout and "ratings" in result.stdout
+    for name in ("results.json", "results.csv", "capture_rates.png"):
+        assert (out / name).is_file(), name
+    data = json.loads((out / "results.json").read_text())
+    assert len(data["pairings"]) == 3 and data["seeds"] == [0, 1] and data["episodes_per_seed"] == 20
+    assert {r["name"] for r in data["ratings"]} == {"pure-pursuit", "random-walk", "greedy", "rash"}
+    assert all(row["best_in_row"] for row in data["pairings"])  # one pursuer: best in every row
+    again = runner.invoke(app, args)
+    assert again.exit_code == 1 and "--resume" in again.output
+    resumed = runner.invoke(app, [*args, "--resume", "--json"])
+    assert resumed.exit_code == 0 and json.loads(resumed.stdout)["pairings"] == data["pairings"]
+
+
+def test_cli_errors_are_one_line(tmp_path: Path) -> None:
+    for args, message in (
+        (["tournament"], "nothing to play"),
+        (["tournament", str(tmp_path / "nope")], "no such file or folder"),
+        (["tournament", "--baselines", "-n", "0"], "--episodes must be at least 1"),
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 1 and message in result.output and "Traceback" not in result.output

@@ -1,8 +1,8 @@
 """Scenarios: the typed, validated description of one pursuit-evasion game.
 
 A scenario is read from YAML with ``yaml.safe_load`` and validated by pydantic.
-Every quantity is in SI units (metres, seconds, radians). Angles may be written
-as numbers or as short expressions such as ``2pi/3``, ``pi`` or ``120deg``.
+Every quantity is in SI units (metres, seconds, radians). Angles (a sensor's ``fov``, a car's
+steering limits) may be written as numbers or as expressions such as ``2pi/3``, ``pi``, ``-20deg``.
 
     >>> scenario = load_scenario("configs/paper.yaml")   # or a built-in name: "paper"
     >>> scenario.pursuer.kind, scenario.capture_distance
@@ -70,8 +70,8 @@ class CarAgent(_Model):
     kind: Literal["car"] = "car"
     lf: float = Field(gt=0, description="centre of gravity to front axle, m")
     lr: float = Field(gt=0, description="centre of gravity to rear axle, m")
-    steer_min: float = Field(description="lowest steering angle delta, rad")
-    steer_max: float = Field(description="highest steering angle delta, rad")
+    steer_min: Angle = Field(description="lowest steering angle delta, rad")
+    steer_max: Angle = Field(description="highest steering angle delta, rad")
     steer_rate_max: float = Field(gt=0, description="steering velocity limit |v_delta|, rad/s")
     v_min: float = Field(description="lowest longitudinal velocity, m/s (negative: reverse)")
     v_max: float = Field(gt=0, description="highest longitudinal velocity, m/s")

@@ -117,13 +117,21 @@ class Run:
         self.path = path
         self.name = path.name
 
+    @staticmethod
+    def check_new(zoo: Path, name: str) -> None:
+        """:class:`ZooError` unless ``zoo/name`` is free for a new run."""
+        if (zoo / name).exists():
+            raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
+
     @classmethod
     def create(cls, zoo: Path, name: str, scenario: Scenario) -> Run:
         """Make a new run folder; :class:`ZooError` if one of that name exists."""
+        cls.check_new(zoo, name)
         path = zoo / name
-        if path.exists():
-            raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
-        path.mkdir(parents=True)
+        try:
+            path.mkdir(parents=True)
+        except OSError as exc:
+            raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
         run = cls(path)
         atomic_write_text(path / "config.yaml", yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
         atomic_write_json(path / "versions.json", versions())

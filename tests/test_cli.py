@@ -67,6 +67,8 @@ def test_play_render(tmp_path: Path, suffix: str) -> None:
         (["play", "-n", "0"], "--episodes must be at least 1"),
         (["play", "--render", "out.mp4"], "--render must end in .png or .gif"),
         (["config", "check", "nope"], "config not found"),
+        (["play", "-c", "quick", "-n", "2", "--render", "/proc/no/such/out.png"], "/proc/no"),
+        (["play", "--pursuer", "configs"], "configs is a folder: give a checkpoint in it"),
     ],
 )
 def test_user_errors_are_one_line_and_exit_1(args: list[str], message: str) -> None:

@@ -101,6 +101,24 @@ def test_resume_continues_the_run(trained: Path) -> None:
     assert (trained / "run" / "command.txt").read_text().count("train pursuer") == 2
 
 
+def test_resume_keeps_the_opponent_seed_and_settings(trained: Path) -> None:
+    base = ["train", "pursuer", "--zoo", str(trained), "--name", "run", "--resume", "-q"]
+    for extra, message in (
+        (["--opponent", "rash"], "trains with --opponent greedy; a resumed run keeps it"),
+        (["--seed", "4"], "trains with --seed 0"),
+        (["--set", "batch_size=64"], "only --steps can change when resuming (not batch_size)"),
+    ):
+        result = invoke([*base, *extra])
+        assert result.exit_code == 1 and message in result.output, result.output
+
+
+def test_overrides_are_read_as_yaml() -> None:
+    from pecli.rl.train import parse_overrides
+
+    assert parse_overrides(["steps=1e4", "learning_rate=3e-4", "curriculum.enabled=false", "net_arch=[64, 64]"]) == {
+        "steps": 10000, "learning_rate": 3e-4, "curriculum.enabled": False, "net_arch": [64, 64]}
+
+
 def test_an_existing_run_needs_resume(trained: Path) -> None:
     result = train(trained, "--steps", "200")
     assert result.exit_code == 1 and "already exists" in result.output
@@ -134,6 +152,11 @@ def test_bad_settings_are_refused(tmp_path: Path) -> None:
     assert result.exit_code == 1 and "KEY=VALUE" in result.output
     result = runner.invoke(app, ["train", "pursuer", "--opponent", "pure-pursuit", "--zoo", str(tmp_path), "-q"])
     assert result.exit_code == 1 and "plays pursuer, not evader" in result.output
+    assert not (tmp_path / "run").exists()  # a run that could not start leaves no folder behind
+    blocked = tmp_path / "file"
+    blocked.write_text("not a folder")
+    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--zoo", str(blocked), "--name", "x", "-q", *TINY])
+    assert result.exit_code == 1 and "cannot create the run folder" in result.output
 
 
 class _FakeModel:

@@ -9,7 +9,8 @@ game step) and sums the rewards, scaled by ``reward_scale``. The observation is 
 
 ``obs``         the last ``frame_stack`` observations of the learner, ``(k * dim,)``
 ``history``     the belief window: every ``history_stride``-th of the last ``history_length``
-                game-step observations, ``(samples * dim,)``
+                game-step observations, ``(samples * dim,)``; left out with ``history=False``
+                (a learner without a belief never reads it, and it would fill most of the replay buffer)
 ``state``       the privileged full state scaled to [-1, 1] plus ``t/T``, ``(state_dim + 1,)``
 ``opp_action``  the action the opponent takes at this step, ``(2,)``
 
@@ -34,9 +35,6 @@ from pecli.policies.base import Policy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, Training
 
-KEYS = ("obs", "history", "state", "opp_action")
-
-
 class FrozenOpponentCore:
     """``n`` games seen by the ``role`` learner, with ``opponent`` playing the other side."""
 
@@ -48,6 +46,7 @@ class FrozenOpponentCore:
         n: int,
         seed: int = 0,
         training: Training | None = None,
+        history: bool = True,
     ) -> None:
         if opponent.role != opponent_of(role):
             raise ValueError(f"the opponent of a {role} must play {opponent_of(role)}, not {opponent.role}")
@@ -60,15 +59,13 @@ class FrozenOpponentCore:
         dim = self.game.obs_dim[role]
         t = self.training
         self.stack = FrameStack(n, dim, t.frame_stack)
-        self.history = HistoryWindow(n, dim, t.history_length, t.history_stride)
-        self.observation_space = spaces.Dict(
-            {
-                "obs": spaces.Box(-1.0, 1.0, (t.frame_stack * dim,), np.float32),
-                "history": spaces.Box(-1.0, 1.0, (self.history.samples * dim,), np.float32),
-                "state": spaces.Box(-1.0, 1.0, (self.game.state_dim + 1,), np.float32),
-                "opp_action": spaces.Box(-1.0, 1.0, (2,), np.float32),
-            }
-        )
+        self.history = HistoryWindow(n, dim, t.history_length, t.history_stride) if history else None
+        boxes = {"obs": spaces.Box(-1.0, 1.0, (t.frame_stack * dim,), np.float32)}
+        if self.history is not None:
+            boxes["history"] = spaces.Box(-1.0, 1.0, (self.history.samples * dim,), np.float32)
+        boxes["state"] = spaces.Box(-1.0, 1.0, (self.game.state_dim + 1,), np.float32)
+        boxes["opp_action"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.observation_space = spaces.Dict(boxes)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.render_mode = None
         self._opponent_obs = np.zeros((n, self.game.obs_dim[self.opponent_role]), np.float32)
@@ -89,7 +86,8 @@ class FrozenOpponentCore:
         self.opponent.reset(self.n, seed=self._opponent_seed)
         own = obs[self.role]
         self.stack.reset(own)
-        self.history.reset(own)
+        if self.history is not None:
+            self.history.reset(own)
         self._return[:] = 0.0
         self._opponent_obs = obs[self.opponent_role]
         self._opponent_action = self._act_opponent()
@@ -99,12 +97,12 @@ class FrozenOpponentCore:
         return np.asarray(self.opponent.act(self._opponent_obs), dtype=np.float64)
 
     def _observation(self, rows: np.ndarray | slice = slice(None)) -> dict[str, np.ndarray]:
-        return {
-            "obs": self.stack.get()[rows],
-            "history": self.history.get()[rows],
-            "state": self.game.normalised_state()[rows],
-            "opp_action": self._opponent_action[rows].astype(np.float32),
-        }
+        obs = {"obs": self.stack.get()[rows]}
+        if self.history is not None:
+            obs["history"] = self.history.get()[rows]
+        obs["state"] = self.game.normalised_state()[rows]
+        obs["opp_action"] = self._opponent_action[rows].astype(np.float32)
+        return obs
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict[str, Any]]]:
         """Hold ``action`` ``(n, 2)`` for ``frame_skip`` game steps; restart games that end."""
@@ -121,7 +119,8 @@ class FrozenOpponentCore:
             reward += result.rewards[self.role]  # finished (frozen) games add 0
             done |= result.done
             captured |= result.captured
-            self.history.push(result.obs[self.role])
+            if self.history is not None:
+                self.history.push(result.obs[self.role])
             self._opponent_obs = result.obs[self.opponent_role]
             if self.game.finished.all():
                 break
@@ -142,7 +141,8 @@ class FrozenOpponentCore:
             fresh = self.game.reset(mask=done)
             self.opponent.reset(self.n, mask=done)
             self.stack.reset(fresh[self.role], mask=done)
-            self.history.reset(fresh[self.role], mask=done)
+            if self.history is not None:
+                self.history.reset(fresh[self.role], mask=done)
             self._opponent_obs = fresh[self.opponent_role]
         self._opponent_action = self._act_opponent()
         scaled = (reward * self.training.reward_scale).astype(np.float32)
@@ -158,10 +158,13 @@ class FrozenOpponentVecEnv(VecEnv):
         opponent: the frozen opponent, any :class:`Policy` of the other role.
         n: number of games (SB3's ``n_envs``).
         seed: seed of the start states and of the opponent's randomness.
+        history: include the belief window ``history`` in the observation.
     """
 
-    def __init__(self, scenario: Scenario, role: Role, opponent: Policy, n: int, seed: int = 0) -> None:
-        self.core = FrozenOpponentCore(scenario, role, opponent, n, seed)
+    def __init__(
+        self, scenario: Scenario, role: Role, opponent: Policy, n: int, seed: int = 0, history: bool = True
+    ) -> None:
+        self.core = FrozenOpponentCore(scenario, role, opponent, n, seed, history=history)
         super().__init__(n, self.core.observation_space, self.core.action_space)
         self._actions: np.ndarray | None = None
         self._next_seed: int | None = seed

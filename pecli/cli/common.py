@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 from collections.abc import Callable
 from typing import Annotated, Any, TypeVar
 
@@ -11,7 +12,6 @@ import typer
 from rich.console import Console
 
 from pecli.errors import PecliError
-from pecli.scenario import Scenario, load_scenario
 
 console = Console()
 err_console = Console(stderr=True)
@@ -28,7 +28,7 @@ SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed: the same se
 
 
 def user_errors(command: F) -> F:
-    """Turn a :class:`PecliError` into one red line and exit code 1.
+    """Turn a :class:`PecliError` or an ``OSError`` into one red line and exit code 1.
 
     Anything else is a bug: one line and exit code 2, with the traceback only when
     ``PECLI_DEBUG`` is set.
@@ -42,6 +42,10 @@ def user_errors(command: F) -> F:
             raise
         except PecliError as exc:
             err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(code=1) from None
+        except OSError as exc:  # an unwritable output, a full disk, a path that is not there
+            where = f"{exc.filename}: " if exc.filename else ""
+            err_console.print(f"[bold red]error:[/] {where}{exc.strerror or exc}", highlight=False, soft_wrap=True)
             raise typer.Exit(code=1) from None
         except Exception as exc:
             if os.environ.get(DEBUG_VARIABLE):
@@ -57,9 +61,12 @@ def user_errors(command: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def scenario_from_option(config: str) -> Scenario:
-    """Load the scenario named by a ``--config`` option."""
-    return load_scenario(config)
+def one_torch_thread() -> None:
+    """Run torch on one thread if a learned policy loaded it: small batched networks gain nothing from
+    more, and on a shared CPU extra threads make a forward pass 10-100x slower."""
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(1)
 
 
 def require_positive(value: int, name: str) -> int:

@@ -10,7 +10,15 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from pecli.cli.common import ConfigOption, SeedOption, console, err_console, require_positive, user_errors
+from pecli.cli.common import (
+    ConfigOption,
+    SeedOption,
+    console,
+    err_console,
+    one_torch_thread,
+    require_positive,
+    user_errors,
+)
 from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
@@ -44,9 +52,12 @@ def play(
     require_positive(episodes, "--episodes")
     if render is not None and render.suffix.lower() not in (".png", ".gif"):
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
+    if render is not None:
+        render.parent.mkdir(parents=True, exist_ok=True)  # fail before playing, not after
     scenario = load_scenario(config)
     pursuer_policy = resolve_policy(pursuer, "pursuer", scenario)
     evader_policy = resolve_policy(evader, "evader", scenario)
+    one_torch_thread()
     record = 0 if render is None else (1 if render.suffix.lower() == ".gif" else 4)
 
     with Progress(

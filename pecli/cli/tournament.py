@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from pecli.cli.common import console, err_console, require_positive, user_errors
+from pecli.cli.common import console, err_console, one_torch_thread, require_positive, user_errors
 from pecli.errors import PecliError
 from pecli.scenario import Scenario, load_scenario
 
@@ -83,6 +83,7 @@ def tournament(
     for reason in found.skipped:
         err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)
     pairings = schedule(found.players, sample=sample, seed=seed)
+    one_torch_thread()
     counts = {role: len(players) for role, players in found.players.items()}
     err_console.print(
         f"{counts['pursuer']} pursuers × {counts['evader']} evaders on {scenario.name}: {len(pairings)} pairings "

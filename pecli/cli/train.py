@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import enum
+import signal
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from pecli.cli.common import ConfigOption, SeedOption, err_console, user_errors
+from pecli.cli.common import ConfigOption, err_console, user_errors
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
 
@@ -34,7 +35,7 @@ def train(
     ] = None,
     algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm.")] = None,
     steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
-    seed: SeedOption = 0,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-role-seed-time).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its last checkpoint.")] = False,
@@ -51,24 +52,45 @@ def train(
     Ctrl-C saves the run so that [bold]--resume[/] continues it with its replay buffer.
     TensorBoard logs are in zoo/<run>/tb.
     """
-    from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, default_run_name, parse_overrides, with_overrides
+    from pecli.rl.train import (
+        DEFAULT_OPPONENT,
+        TrainingInterrupted,
+        TrainJob,
+        default_run_name,
+        parse_overrides,
+        with_overrides,
+    )
     from pecli.rl.train import train as run_training
-    from pecli.zoo import Run
+    from pecli.zoo import LAST, Run, read_metadata
 
     role_name = role.value
-    if resume:
-        if name is None:
-            raise PecliError("--resume needs the --name of the run to continue")
-        scenario = Run.open(zoo, name).scenario()
-    else:
-        scenario = load_scenario(config)
     settings = parse_overrides(overrides or [])
     if steps is not None:
         settings["steps"] = steps
     if algo is not None:
         settings["algo"] = algo.value
+    curriculum_steps = None
+    if resume:
+        if name is None:
+            raise PecliError("--resume needs the --name of the run to continue")
+        run = Run.open(zoo, name)
+        scenario = run.scenario()
+        last = run.checkpoint(role_name, LAST)
+        if not last.is_file():
+            raise PecliError(f"run '{name}' has no {role_name}/{LAST}.zip to resume from")
+        meta = read_metadata(last)
+        for option, given, kept in (("--opponent", opponent, meta.opponent), ("--seed", seed, meta.seed)):
+            if given is not None and given != kept:
+                raise PecliError(f"run '{name}' trains with {option} {kept}; a resumed run keeps it")
+        changed = sorted(set(settings) - {"steps"} - ({"algo"} if settings.get("algo") == meta.algo else set()))
+        if changed:
+            raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
+        opponent, seed, curriculum_steps = meta.opponent, meta.seed, scenario.training.steps
+    else:
+        scenario = load_scenario(config)
     if settings:
-        scenario = with_overrides(scenario, settings)
+        scenario = with_overrides(scenario, settings, source="options")
+    seed = 0 if seed is None else seed
     job = TrainJob(
         role=role_name,
         scenario=scenario,
@@ -78,16 +100,23 @@ def train(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        curriculum_steps=curriculum_steps,
     )
 
     def started(run: Run) -> None:
         err_console.print(f"run [bold]{run.path}[/]: {role_name} vs {job.opponent} on {scenario.name}, "
                           f"{scenario.training.steps:,} steps", highlight=False)
 
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # SIGTERM (a scheduler, a benchmark's time limit) saves like Ctrl-C
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
         final = run_training(job, on_start=started)
-    except KeyboardInterrupt:
-        err_console.print(f"[yellow]interrupted[/]: saved {zoo / job.name / role_name}/last.zip; "
+    except TrainingInterrupted as stop:
+        err_console.print(f"[yellow]interrupted[/]: saved {stop.checkpoint}; "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     err_console.print(f"[green]done[/]: {final}", highlight=False)

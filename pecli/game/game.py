@@ -106,7 +106,8 @@ class Game:
     def reset(self, seed: int | None = None, mask: np.ndarray | None = None) -> dict[Role, np.ndarray]:
         """Start new episodes, in every game or where ``mask`` is true; returns all observations.
 
-        A new ``seed`` restarts the episode counters, so the same seed gives the same start states.
+        A new ``seed`` without a mask restarts the episode counters, so the same seed gives the same
+        start states; with a mask the restarted games continue their counters under the new seed.
         """
         if seed is not None:
             self.seed = int(seed)

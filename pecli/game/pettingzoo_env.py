@@ -38,7 +38,7 @@ class PursuitEvasionEnv(ParallelEnv):
         self.possible_agents: list[Role] = list(ROLES)
         self.agents: list[Role] = []
         self.render_mode = None
-        self._game = SingleGame(self.scenario, seed=0)
+        self._game = SingleGame(self.scenario)  # reset(seed=...) makes it reproducible
         self.observation_spaces = {
             role: spaces.Box(-1.0, 1.0, shape=(self._game.obs_dim[role],), dtype=np.float32) for role in ROLES
         }

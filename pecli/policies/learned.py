@@ -84,28 +84,32 @@ class LearnedPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.shape[0] != self.n:
             self.reset(obs.shape[0])
-        if self._stack is None or self._history is None:
+        if self._stack is None:
             dim = obs.shape[1]
             self._stack = FrameStack(self.n, dim, self.meta.frame_stack)
-            self._history = HistoryWindow(self.n, dim, self.meta.history_length, self.meta.history_stride)
+            if self.meta.belief != "none":
+                self._history = HistoryWindow(self.n, dim, self.meta.history_length, self.meta.history_stride)
         fresh = self._fresh
-        self._history.push(obs)
+        if self._history is not None:
+            self._history.push(obs)
         if fresh.any():
             self._clock[fresh] = 0
             self._stack.reset(obs, mask=fresh)
-            self._history.reset(obs, mask=fresh)
+            if self._history is not None:
+                self._history.reset(obs, mask=fresh)
             self._fresh = np.zeros(self.n, dtype=bool)
         due = self._clock % self.meta.frame_skip == 0
         self._clock += 1
         if due.any():
-            stacked = self._stack.push(obs, mask=due)
-            self._action[due] = self._forward(stacked[due], self._history.get()[due])
+            batch = {"obs": self._stack.push(obs, mask=due)[due]}
+            if self._history is not None:
+                batch["history"] = self._history.get()[due]
+            self._action[due] = self._forward(batch)
         return self._action.copy()
 
-    def _forward(self, stacked: np.ndarray, history: np.ndarray) -> np.ndarray:
+    def _forward(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         with th.no_grad():
-            batch = {"obs": th.as_tensor(stacked), "history": th.as_tensor(history)}
-            return self.actor(batch).numpy()
+            return self.actor({key: th.as_tensor(value) for key, value in batch.items()}).numpy()
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"

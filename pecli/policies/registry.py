@@ -57,6 +57,8 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
             raise PolicyError(f"'{spec}' plays {plays}, not {role} (for {role}: {', '.join(builtin_names(role))})")
         return cls(scenario, role, seed=seed)
     path = Path(spec)
+    if path.is_dir():
+        raise PolicyError(f"{spec} is a folder: give a checkpoint in it, such as {path / role / 'final.zip'}")
     if path.exists():
         return _load_file(path, role, scenario, seed)
     if ":" in spec:

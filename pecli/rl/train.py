@@ -48,7 +48,10 @@ def with_overrides(scenario: Scenario, overrides: dict[str, Any], source: str = 
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """``["steps=1e4", "curriculum.enabled=false"]`` → ``{"steps": 10000.0, ...}`` (values read as YAML)."""
+    """``["steps=1e4", "curriculum.enabled=false"]`` → ``{"steps": 10000, "curriculum.enabled": False}``.
+
+    Values are read as YAML; a number in exponent form that is whole (``1e4``) becomes an integer.
+    """
     overrides: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
@@ -58,15 +61,32 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = yaml.safe_load(text)
         except yaml.YAMLError:
             value = text
-        if isinstance(value, float) and value.is_integer() and "." not in text and "e" in text.lower():
-            value = int(value)  # 1e5 means a count here
+        if isinstance(value, str):
+            try:
+                number = float(value)
+            except ValueError:
+                pass
+            else:
+                value = int(number) if number.is_integer() else number
         overrides[key.strip()] = value
     return overrides
 
 
+class TrainingInterrupted(Exception):
+    """Training stopped on Ctrl-C (or SIGTERM) after saving ``checkpoint`` for ``--resume``."""
+
+    def __init__(self, checkpoint: Path) -> None:
+        super().__init__(str(checkpoint))
+        self.checkpoint = checkpoint
+
+
 @dataclass
 class TrainJob:
-    """Everything one ``pecli train`` needs."""
+    """Everything one ``pecli train`` needs.
+
+    ``curriculum_steps`` is the budget the curriculum is scheduled over: the run's original budget,
+    so that a resumed run with a larger ``--steps`` continues the schedule instead of rewinding it.
+    """
 
     role: Role
     scenario: Scenario
@@ -76,6 +96,7 @@ class TrainJob:
     seed: int = 0
     resume: bool = False
     progress: bool = True
+    curriculum_steps: int | None = None
 
 
 def _meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
@@ -137,28 +158,40 @@ def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     return evaluate
 
 
+def resume_seed(seed: int, steps: int) -> int:
+    """The seed a run resumed at ``steps`` continues with: new start states and noise, still reproducible."""
+    return int(np.random.SeedSequence([seed, steps]).generate_state(1)[0] % 2**31)
+
+
 def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
-    """Run ``job``; returns the final checkpoint. Ctrl-C saves ``last`` and re-raises ``KeyboardInterrupt``."""
+    """Run ``job``; returns the final checkpoint.
+
+    Ctrl-C saves ``last`` with the replay buffer and raises :class:`TrainingInterrupted`.
+    """
     t = job.scenario.training
     th.set_num_threads(t.torch_threads)
     opponent = resolve_policy(job.opponent, opponent_of(job.role), job.scenario, seed=job.seed)
-    env = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=job.seed)
-
     if job.resume:
         run = Run.open(job.zoo, job.name)
-        run.log_command()
         last = run.checkpoint(job.role, LAST)
         if not last.is_file():
             raise PecliError(f"run '{job.name}' has no {job.role}/{LAST}.zip to resume from")
-        episodes = read_metadata(last).episodes
+        meta = read_metadata(last)
+        seed = resume_seed(job.seed, meta.steps)
+        env = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=False)
         model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
+        model.set_random_seed(seed)
         buffer = run.role_dir(job.role) / REPLAY_BUFFER
         if buffer.is_file():
             model.load_replay_buffer(buffer)
+        run.log_command()
+        episodes = meta.episodes
     else:
+        Run.check_new(job.zoo, job.name)
+        env = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=job.seed, history=False)
+        model = make_model(job, env, job.zoo / job.name / "tb")
         run = Run.create(job.zoo, job.name, job.scenario)
         episodes = 0
-        model = make_model(job, env, run.path / "tb")
     if on_start is not None:
         on_start(run)
 
@@ -173,8 +206,9 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
 
     stats.listeners.append(checkpoint)
     callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
-    if t.curriculum.enabled:
-        callbacks.insert(0, CurriculumCallback(job.scenario, t.steps, t.curriculum.fraction))
+    if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
+        schedule = job.curriculum_steps or t.steps
+        callbacks.insert(0, CurriculumCallback(job.scenario, schedule, t.curriculum.fraction))
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
         callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv"))
@@ -189,9 +223,13 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
                 tb_log_name=job.role,
             )
     except KeyboardInterrupt:
-        run.save(model, job.role, LAST, _meta(job, model, stats.episodes))
+        last = run.save(model, job.role, LAST, _meta(job, model, stats.episodes))
         run.save_replay_buffer(model, job.role)
-        raise
+        raise TrainingInterrupted(last) from None
+    finally:
+        logger = getattr(model, "_logger", None)
+        if logger is not None:
+            logger.close()
     run.save(model, job.role, LAST, _meta(job, model, stats.episodes))
     run.save_replay_buffer(model, job.role)
     return run.save(model, job.role, FINAL, _meta(job, model, stats.episodes))

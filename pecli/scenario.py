@@ -154,10 +154,28 @@ class Curriculum(_Model):
     fraction: float = Field(default=0.3, gt=0, le=1, description="share of the training budget it spans")
 
 
+class BeliefSettings(_Model):
+    """The belief network and how it is fitted (paper section V-A)."""
+
+    hidden: int = Field(default=128, ge=1, description="BiMDN LSTM units per direction")
+    fc: int = Field(default=32, ge=1, description="width of the shared layer and of each head")
+    components: int = Field(default=3, ge=1, description="Gaussians in the mixture")
+    samples: int = Field(default=16, ge=1, description="draws the 'bimdn-mixed' actor reads")
+    buffer_size: int = Field(default=25_000, ge=1, description="(window, true position) pairs kept")
+    warmup: int = Field(default=10_000, ge=0, description="pairs collected before fitting starts")
+    update_every: int = Field(default=10, ge=1, description="vector-env steps between belief updates")
+    batch_size: int = Field(default=256, ge=1)
+    learning_rate: float = Field(default=0.002, gt=0)
+    max_grad_norm: float = Field(default=1.0, gt=0, description="(ours) gradient clipping of the belief's updates")
+
+
 class Training(_Model):
     """How a learner is trained (Stable-Baselines3 TD3/DDPG on a frozen-opponent view)."""
 
     algo: Literal["td3", "ddpg"] = "td3"
+    belief: Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"] = Field(
+        default="none", description="what the actor adds to its observation about the unseen opponent"
+    )
     steps: int = Field(default=1_000_000, ge=1, description="budget in learner transitions (all envs together)")
     n_envs: int = Field(default=8, ge=1, description="games stepped together in one process")
     frame_skip: int = Field(default=2, ge=1, description="game steps each action is held for")
@@ -180,6 +198,7 @@ class Training(_Model):
     eval_episodes: int = Field(default=200, ge=1)
     torch_threads: int = Field(default=1, ge=1, description="torch threads per process (1 is fastest on a shared CPU)")
     curriculum: Curriculum = Curriculum()
+    belief_settings: BeliefSettings = BeliefSettings()
 
     @model_validator(mode="after")
     def _window_fits(self) -> Training:

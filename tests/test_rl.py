@@ -22,19 +22,27 @@ def tiny(scenario: Scenario) -> Scenario:
     return with_overrides(scenario, {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [32, 32]})
 
 
-def model_for(scenario: Scenario, algo: str = "td3", n: int = 4):
-    scenario = with_overrides(tiny(scenario), {"algo": algo})
-    env = FrozenOpponentVecEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario), n=n, seed=0)
+def model_for(scenario: Scenario, algo: str = "td3", n: int = 4, belief: str = "none"):
+    scenario = with_overrides(tiny(scenario), {"algo": algo, "belief": belief, "belief_settings.hidden": 16})
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="t")
-    return make_model(job, env, tensorboard=None), env
+    if belief == "none":
+        env = FrozenOpponentVecEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario), n=n, seed=0)
+        return make_model(job, env, tensorboard=None), env
+    from pecli.rl.train import make_env
+
+    env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
+    model = make_model(job, env, tensorboard=None)
+    env.set_belief(model.policy.actor.features_extractor.belief)
+    return model, env
 
 
 def tensors(obs: dict[str, np.ndarray]) -> dict[str, th.Tensor]:
     return {key: th.as_tensor(value) for key, value in obs.items()}
 
 
-def test_actor_ignores_privileged_keys_and_critic_reads_them(quick: Scenario) -> None:
-    model, env = model_for(quick)
+@pytest.mark.parametrize("belief", ["none", "bimdn"])
+def test_actor_ignores_privileged_keys_and_critic_reads_them(quick: Scenario, belief: str) -> None:
+    model, env = model_for(quick, belief=belief)
     obs = env.reset()
     policy = model.policy
     assert isinstance(policy, CentralCriticPolicy)
@@ -45,13 +53,18 @@ def test_actor_ignores_privileged_keys_and_critic_reads_them(quick: Scenario) ->
         q_before = policy.critic(tensors(obs), action)[0].numpy()
         q_after = policy.critic(tensors(changed), action)[0].numpy()
     assert not np.allclose(q_before, q_after)
-    assert policy.actor.features_extractor.keys == ("obs",)
     assert policy.critic.features_extractor.keys == ("obs", "state", "opp_action")
+    if belief == "none":
+        assert policy.actor.features_extractor.keys == ("obs",)
+    else:  # the actor reads the stored belief: changing it changes the action
+        moved = {**obs, "belief": obs["belief"] + 0.5}
+        with th.no_grad():
+            assert not np.allclose(policy.actor(tensors(obs)).numpy(), policy.actor(tensors(moved)).numpy())
 
 
-@pytest.mark.parametrize("algo", ["td3", "ddpg"])
-def test_save_and_load_round_trip(quick: Scenario, tmp_path: Path, algo: str) -> None:
-    model, env = model_for(quick, algo)
+@pytest.mark.parametrize(("algo", "belief"), [("td3", "none"), ("ddpg", "none"), ("td3", "bimdn")])
+def test_save_and_load_round_trip(quick: Scenario, tmp_path: Path, algo: str, belief: str) -> None:
+    model, env = model_for(quick, algo, belief=belief)
     model.learn(200)
     path = tmp_path / "model.zip"
     model.save(path)
@@ -64,6 +77,10 @@ def test_save_and_load_round_trip(quick: Scenario, tmp_path: Path, algo: str) ->
         np.testing.assert_array_equal(
             model.policy.critic(tensors(obs), action)[0].numpy(), loaded.policy.critic(tensors(obs), action)[0].numpy()
         )
+    if belief != "none":  # the belief network travels in the zip
+        for a, b in zip(model.policy.actor.features_extractor.belief.parameters(),
+                        loaded.policy.actor.features_extractor.belief.parameters()):
+            assert th.equal(a, b)
 
 
 def test_a_learned_policy_plays_exactly_as_in_its_training_view(quick: Scenario) -> None:

@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from pecli.cli.common import ConfigOption, err_console, user_errors
+from pecli.belief import BELIEF_KINDS
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
 
@@ -24,6 +25,9 @@ class AlgoChoice(str, enum.Enum):
     ddpg = "ddpg"
 
 
+BeliefChoice = enum.Enum("BeliefChoice", {kind.replace("-", "_"): kind for kind in BELIEF_KINDS}, type=str)
+
+
 @user_errors
 def train(
     role: Annotated[RoleChoice, typer.Argument(help="The role to train.", show_default=False)],
@@ -34,6 +38,10 @@ def train(
                      "Default: greedy for a pursuer, pure-pursuit for an evader."),
     ] = None,
     algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm.")] = None,
+    belief: Annotated[
+        BeliefChoice | None,
+        typer.Option("--belief", help="What the actor knows of the unseen opponent (default: the config's, none)."),
+    ] = None,
     steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
     seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
@@ -69,6 +77,8 @@ def train(
         settings["steps"] = steps
     if algo is not None:
         settings["algo"] = algo.value
+    if belief is not None:
+        settings["belief"] = belief.value
     curriculum_steps = None
     if resume:
         if name is None:
@@ -82,7 +92,8 @@ def train(
         for option, given, kept in (("--opponent", opponent, meta.opponent), ("--seed", seed, meta.seed)):
             if given is not None and given != kept:
                 raise PecliError(f"run '{name}' trains with {option} {kept}; a resumed run keeps it")
-        changed = sorted(set(settings) - {"steps"} - ({"algo"} if settings.get("algo") == meta.algo else set()))
+        unchanged = {key for key, kept in (("algo", meta.algo), ("belief", meta.belief)) if settings.get(key) == kept}
+        changed = sorted(set(settings) - {"steps"} - unchanged)
         if changed:
             raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
         opponent, seed, curriculum_steps = meta.opponent, meta.seed, scenario.training.steps

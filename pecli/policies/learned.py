@@ -70,6 +70,9 @@ class LearnedPolicy:
         return cls(model.policy.actor, role, scenario, meta)
 
     def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
+        belief = getattr(getattr(self.actor, "features_extractor", None), "belief", None)
+        if seed is not None and belief is not None:  # the draws of a mixed belief follow the seed
+            belief.generator = th.Generator().manual_seed(seed)
         if mask is None or n != self.n:
             self.n = n
             self._fresh = np.ones(n, dtype=bool)
@@ -108,8 +111,11 @@ class LearnedPolicy:
         return self._action.copy()
 
     def _forward(self, batch: dict[str, np.ndarray]) -> np.ndarray:
+        """SB3's ``Actor.forward`` without its preprocessing, which insists on the training-time keys
+        (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window)."""
         with th.no_grad():
-            return self.actor({key: th.as_tensor(value) for key, value in batch.items()}).numpy()
+            features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
+            return self.actor.mu(features).numpy()
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"

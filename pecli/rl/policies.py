@@ -1,6 +1,6 @@
 """A TD3/DDPG policy whose actor and critic read different parts of a ``Dict`` observation.
 
-The actor sees only what the player sees (``obs``; later also its belief); the critic also sees
+The actor sees only what the player sees (``obs`` and, with a belief, its features); the critic also sees
 the privileged full ``state`` and the opponent's action ``opp_action``. That is MADDPG's
 centralised critic with decentralised execution, on top of SB3's ``TD3Policy``: only
 ``make_critic`` changes, so save/load through SB3's zip format works as usual.
@@ -9,31 +9,14 @@ centralised critic with decentralised execution, on top of SB3's ``TD3Policy``: 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from math import prod
 from typing import Any
 
-import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.td3.policies import ContinuousCritic, TD3Policy
 
-ACTOR_KEYS = ("obs",)
-CRITIC_KEYS = ("obs", "state", "opp_action")
-
-
-class KeysExtractor(BaseFeaturesExtractor):
-    """Concatenate the chosen entries of a ``Dict`` observation: ``(batch, sum of their sizes)``."""
-
-    def __init__(self, observation_space: spaces.Dict, keys: Sequence[str] = ACTOR_KEYS) -> None:
-        missing = [key for key in keys if key not in observation_space.spaces]
-        if missing:
-            raise KeyError(f"observation has no {', '.join(missing)}; it has {', '.join(observation_space.spaces)}")
-        super().__init__(observation_space, sum(prod(observation_space[key].shape) for key in keys))
-        self.keys = tuple(keys)
-
-    def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:
-        return th.cat([observations[key].flatten(1) for key in self.keys], dim=1)
+from pecli.rl.extractors import ACTOR_KEYS, CRITIC_KEYS, KeysExtractor
 
 
 class CentralCriticPolicy(TD3Policy):

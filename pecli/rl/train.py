@@ -23,7 +23,10 @@ from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy, algorithm_class
+from pecli.belief.model import LEARNED_KINDS
+from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
+from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.policies import CentralCriticPolicy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
@@ -106,7 +109,7 @@ def _meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
         steps=int(model.num_timesteps),
         episodes=episodes,
         algo=t.algo,
-        belief="none",
+        belief=t.belief,
         scenario=job.scenario.name,
         scenario_hash=job.scenario.fingerprint(),
         opponent=job.opponent,
@@ -119,9 +122,44 @@ def _meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
     )
 
 
-def make_model(job: TrainJob, env: FrozenOpponentVecEnv, tensorboard: Path | None) -> Any:
+def belief_kwargs(job: TrainJob) -> dict[str, Any]:
+    """Keyword arguments of the actor's :class:`BeliefModel` for this job."""
+    t, b = job.scenario.training, job.scenario.training.belief_settings
+    samples = -(-t.history_length // t.history_stride)
+    dim = _obs_dim(job.scenario, job.role)
+    return {
+        "kind": t.belief, "window": (samples, dim), "scenario": job.scenario.model_dump(mode="json"),
+        "role": job.role, "hidden": b.hidden, "fc": b.fc, "components": b.components, "samples": b.samples,
+    }
+
+
+def _obs_dim(scenario: Scenario, role: Role) -> int:
+    from pecli.game.observation import ObservationCodec
+
+    return ObservationCodec(scenario, role).dim
+
+
+def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | BeliefVecEnv:
+    """The batched learner view; with a belief, wrapped so that transitions carry its features."""
+    t = job.scenario.training
+    with_belief = t.belief != "none"
+    view = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=with_belief)
+    if not with_belief:
+        return view
+    buffer = None
+    if t.belief in LEARNED_KINDS:
+        window = view.observation_space["history"].shape[0]
+        buffer = BeliefBuffer(t.belief_settings.buffer_size, window, seed=seed)
+    features = 2 * t.belief_settings.samples if t.belief == "bimdn-mixed" else 2
+    return BeliefVecEnv(view, features, buffer)
+
+
+def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorboard: Path | None) -> Any:
     """A fresh SB3 model with the paper's hyperparameters from the scenario's training section."""
     t = job.scenario.training
+    policy_kwargs: dict[str, Any] = {"net_arch": list(t.net_arch)}
+    if t.belief != "none":
+        policy_kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
     return algorithm_class(t.algo)(
         CentralCriticPolicy,
         env,
@@ -134,7 +172,7 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv, tensorboard: Path | Non
         train_freq=(t.train_freq, "step"),
         gradient_steps=t.gradient_steps,
         action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
-        policy_kwargs={"net_arch": list(t.net_arch)},
+        policy_kwargs=policy_kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
         seed=job.seed,
         device="cpu",
@@ -178,7 +216,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
             raise PecliError(f"run '{job.name}' has no {job.role}/{LAST}.zip to resume from")
         meta = read_metadata(last)
         seed = resume_seed(job.seed, meta.steps)
-        env = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=False)
+        env = make_env(job, opponent, seed)
         model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
         buffer = run.role_dir(job.role) / REPLAY_BUFFER
@@ -188,10 +226,14 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         episodes = meta.episodes
     else:
         Run.check_new(job.zoo, job.name)
-        env = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=job.seed, history=False)
+        env = make_env(job, opponent, job.seed)
         model = make_model(job, env, job.zoo / job.name / "tb")
         run = Run.create(job.zoo, job.name, job.scenario)
         episodes = 0
+    belief = None
+    if isinstance(env, BeliefVecEnv):
+        belief = model.policy.actor.features_extractor.belief
+        env.set_belief(belief)
     if on_start is not None:
         on_start(run)
 
@@ -209,6 +251,8 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         callbacks.insert(0, CurriculumCallback(job.scenario, schedule, t.curriculum.fraction))
+    if belief is not None and belief.learned and isinstance(env, BeliefVecEnv) and env.buffer is not None:
+        callbacks.append(FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half))
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
         callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv"))

@@ -1,0 +1,95 @@
+"""One belief of any kind: history window → mixture over the opponent's position → the actor's features.
+
+Kinds:
+
+``bimdn``        the BiMDN; features: the mixture's weighted mean (2 numbers, the paper's "Ours")
+``bimdn-mixed``  the BiMDN; features: ``samples`` draws from the mixture (the paper's "Ours-Mixed")
+``ukf``          an unscented Kalman filter run over the window; features: its mean
+``image``        the window rasterised into a top-down image, a small CNN, the BiMDN's mixture head
+
+Positions are in the world frame, normalised by the arena's half-extents.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from torch import nn
+
+from pecli.belief.bimdn import BiMDN
+from pecli.belief.mixture import Mixture
+from pecli.belief.window import WindowDecoder
+from pecli.roles import Role
+from pecli.scenario import scenario_from_dict
+
+LEARNED_KINDS = ("bimdn", "bimdn-mixed", "image")
+
+
+class BeliefModel(nn.Module):
+    """The belief of one player.
+
+    Args:
+        kind: ``bimdn``, ``bimdn-mixed``, ``ukf`` or ``image``.
+        window: ``(samples, dim)`` of the history window.
+        scenario: the scenario as a dict (``Scenario.model_dump(mode="json")``), for decoding windows.
+        role: the player holding the belief.
+        hidden, fc, components: BiMDN sizes (paper: 128, 32, 3).
+        samples: draws for ``bimdn-mixed`` (paper: 16).
+    """
+
+    def __init__(
+        self,
+        kind: str,
+        window: tuple[int, int],
+        scenario: dict[str, Any],
+        role: Role,
+        hidden: int = 128,
+        fc: int = 32,
+        components: int = 3,
+        samples: int = 16,
+    ) -> None:
+        super().__init__()
+        if kind not in ("bimdn", "bimdn-mixed", "ukf", "image"):
+            raise ValueError(f"unknown belief kind {kind!r}")
+        self.kind, self.window, self.samples = kind, tuple(window), samples
+        self.decoder = WindowDecoder(scenario_from_dict(scenario), role)
+        self.net: nn.Module | None
+        if kind in ("bimdn", "bimdn-mixed"):
+            self.net = BiMDN(window[1], hidden, fc, components)
+        elif kind == "image":
+            from pecli.belief.image import ImageBelief
+
+            self.net = ImageBelief(self.decoder, fc=fc, components=components)
+        else:
+            from pecli.belief.ukf import WindowUKF
+
+            self.net = None
+            self.ukf = WindowUKF(self.decoder)
+        self.generator: th.Generator | None = None  # for bimdn-mixed draws at play time
+
+    @property
+    def learned(self) -> bool:
+        return self.net is not None
+
+    @property
+    def features_dim(self) -> int:
+        return 2 * self.samples if self.kind == "bimdn-mixed" else 2
+
+    def mixture(self, history: th.Tensor) -> Mixture:
+        """The belief for flattened windows ``(B, samples * dim)``."""
+        if self.net is None:
+            return self.ukf(history.detach().cpu().numpy())
+        return self.net(history.view(history.shape[0], *self.window))
+
+    @th.no_grad()
+    def features(self, history: th.Tensor) -> th.Tensor:
+        """What the actor reads: ``(B, features_dim)``, without gradients (the belief learns on its own loss)."""
+        mixture = self.mixture(history)
+        if self.kind == "bimdn-mixed":
+            return mixture.sample(self.samples, self.generator).flatten(1)
+        return mixture.mean()
+
+    def features_numpy(self, history: np.ndarray) -> np.ndarray:
+        return self.features(th.as_tensor(history, dtype=th.float32)).numpy()

@@ -15,8 +15,9 @@ transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluatio
 greedy evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
 ``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
-interpolates every seed's curve on a common CPU-time grid, prints the median capture rate at
-10 and 30 CPU-minutes, and draws ``docs/learning_curves.png``.
+takes each seed's best evaluation within 10 and 30 CPU-minutes, prints their medians, and draws
+``docs/learning_curves_<belief>.png``. ``--belief`` picks the actor's belief (runs are named
+``<config>-<belief>-s<seed>``).
 """
 
 from __future__ import annotations
@@ -102,21 +103,21 @@ def curves(args: argparse.Namespace) -> None:
     while pending or running:
         while pending and len(running) < args.jobs:
             seed = pending.pop(0)
-            name = f"{args.config}-s{seed}"
+            name = f"{args.config}-{args.belief}-s{seed}"
             command = [
                 sys.executable, "-m", "pecli", "train", "pursuer", "-c", args.config, "--zoo", str(CURVES),
-                "--name", name, "--seed", str(seed), "--steps", str(args.max_steps), "-q",
+                "--name", name, "--seed", str(seed), "--steps", str(args.max_steps), "-q", "--belief", args.belief,
                 "--set", f"eval_every={args.eval_every}", *sum((["--set", s] for s in args.set), []),
             ]
             print("started:", " ".join(command[1:]), flush=True)
             running.append((seed, subprocess.Popen(command, cwd=ROOT)))
         time.sleep(5)
         for seed, process in list(running):
-            csv_path = CURVES / f"{args.config}-s{seed}" / "eval_pursuer.csv"
+            csv_path = CURVES / f"{args.config}-{args.belief}-s{seed}" / "eval_pursuer.csv"
             used = _last_cpu_seconds(csv_path)
             if process.poll() is not None or used >= 60 * args.minutes:
                 if process.poll() is None:
-                    process.terminate()  # the run has had its CPU budget
+                    process.terminate()  # the run has had its CPU budget; SIGTERM saves last.zip
                     process.wait()
                 print(f"seed {seed}: stopped at {used / 60:.1f} CPU-minutes", flush=True)
                 running.remove((seed, process))
@@ -143,7 +144,7 @@ def report(args: argparse.Namespace) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = sorted(CURVES.glob(f"{args.config}-s*/eval_pursuer.csv"))
+    runs = sorted(CURVES.glob(f"{args.config}-{args.belief}-s*/eval_pursuer.csv"))
     if not runs:
         sys.exit(f"no curve runs in {CURVES}: run the 'curves' step first")
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -158,10 +159,10 @@ def report(args: argparse.Namespace) -> None:
     ax.set_xlabel("CPU minutes (one torch thread)")
     ax.set_ylabel("capture rate vs greedy (200 episodes)")
     ax.set_ylim(0, 1)
-    ax.set_title(f"pecli train pursuer, {args.config}")
+    ax.set_title(f"pecli train pursuer, {args.config}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = ROOT / "docs" / "learning_curves.png"
+    out = ROOT / "docs" / f"learning_curves_{args.belief}.png"
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
     for minutes, values in at.items():
@@ -179,6 +180,7 @@ def main() -> None:
     s.add_argument("--repeats", type=int, default=3)
     c = sub.add_parser("curves")
     c.add_argument("--config", default="paper")
+    c.add_argument("--belief", default="none")
     c.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     c.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per seed")
     c.add_argument("--jobs", type=int, default=2)
@@ -188,6 +190,7 @@ def main() -> None:
     c.add_argument("--set", action="append", default=[], help="extra training settings, KEY=VALUE")
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")
+    r.add_argument("--belief", default="none")
     args = parser.parse_args()
     {"speed": speed, "curves": curves, "report": report}[args.step](args)
 

@@ -10,7 +10,7 @@ Episode ``i`` under seed ``s`` always starts from the same state, whoever plays 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -70,6 +70,8 @@ class Recording:
     seen_by_evader: np.ndarray  # (T1, r) bool
     steps: np.ndarray  # (r,) steps each episode lasted
     captured: np.ndarray  # (r,) bool
+    # per role with a belief: weights (T1, r, K), means (T1, r, K, 2), stds (T1, r, K, 2), normalised world frame
+    beliefs: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 def policy_seeds(seed: int) -> tuple[int, int]:
@@ -103,10 +105,14 @@ def play_match(
     captured = np.zeros(episodes, dtype=bool)
     record = min(record, episodes)
     frames: list[tuple[np.ndarray, dict]] = []
+    beliefs: dict[str, list] = {}
     if record:
         frames.append((game.state()[:record], {k: v[:record] for k, v in game.seen().items()}))
     for step in range(1, scenario.horizon + 1):
-        result = game.step(pursuer.act(obs["pursuer"]), evader.act(obs["evader"]))
+        pursuer_action, evader_action = pursuer.act(obs["pursuer"]), evader.act(obs["evader"])
+        if record:  # each player's belief about the current frame, which its action just used
+            _record_beliefs(beliefs, pursuer, evader, record)
+        result = game.step(pursuer_action, evader_action)
         captured |= result.captured
         if record:
             frames.append((game.state()[:record], {k: v[:record] for k, v in result.seen.items()}))
@@ -129,5 +135,21 @@ def play_match(
         seen_by_evader=np.stack([f[1]["evader"] for f in frames]),
         steps=match.steps[:record].copy(),
         captured=captured[:record].copy(),
+        beliefs={role: _stack_beliefs(items, len(frames)) for role, items in beliefs.items()},
     )
     return match, recording
+
+
+def _record_beliefs(beliefs: dict[str, list], pursuer: Policy, evader: Policy, record: int) -> None:
+    """Append the current beliefs of the players that have one (their ``current_belief()``)."""
+    for role, policy in (("pursuer", pursuer), ("evader", evader)):
+        current = getattr(policy, "current_belief", None)
+        belief = current() if current is not None else None
+        if belief is not None:
+            beliefs.setdefault(role, []).append(tuple(part[:record] for part in belief))
+
+
+def _stack_beliefs(items: list, frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(weights, means, stds)`` per frame; the last frame (after the last step) repeats the last belief."""
+    items = items[:frames] + [items[-1]] * (frames - len(items))
+    return tuple(np.stack([item[i] for item in items]) for i in range(3))  # type: ignore[return-value]

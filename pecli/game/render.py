@@ -1,4 +1,7 @@
-"""Drawings of recorded episodes: trajectories, field-of-view wedges and capture points (matplotlib).
+"""Drawings of recorded episodes: trajectories, field-of-view wedges, beliefs and capture points (matplotlib).
+
+A learned player with a belief has it drawn as dotted 1-sigma and 2-sigma ellipses per mixture
+component (in its own colour, stronger for heavier components), next to the opponent's true position.
 
 ``draw_episodes`` writes a PNG with a panel per episode; ``animate_episode`` writes a GIF of one.
 matplotlib is imported lazily with the non-interactive Agg backend.
@@ -76,6 +79,23 @@ def _body_patch(state: np.ndarray, role: str):
     return Polygon(points, closed=True, color=COLOURS[role], zorder=5)
 
 
+def _draw_belief(ax: Axes, recording: Recording, role: str, episode: int, t: int) -> None:
+    """A player's belief at frame ``t``: each mixture component as 1-sigma and 2-sigma ellipses, shaded by weight."""
+    from matplotlib.patches import Ellipse
+
+    if role not in recording.beliefs:
+        return
+    weights, means, stds = (part[t, episode] for part in recording.beliefs[role])
+    hx, hy = recording.scenario.arena.half
+    colour = COLOURS[role]
+    for w, mu, sd in zip(weights, means, stds):
+        centre = (mu[0] * hx, mu[1] * hy)
+        for k, alpha in ((1, 0.35), (2, 0.15)):
+            ax.add_patch(Ellipse(centre, 2 * k * sd[0] * hx, 2 * k * sd[1] * hy, fill=False, ls=":",
+                                 lw=1.0, color=colour, alpha=max(0.1, alpha * (0.3 + 0.7 * float(w))), zorder=4))
+        ax.plot(*centre, "+", color=colour, ms=5 + 6 * float(w), zorder=4)
+
+
 def _outcome(recording: Recording, episode: int) -> str:
     steps = int(recording.steps[episode])
     if recording.captured[episode]:
@@ -103,6 +123,8 @@ def draw_episodes(recording: Recording, path: str | Path, episodes: int = 4) -> 
             for t in moments:
                 ax.add_patch(_sensor_patch(states[t], role, recording, alpha=0.08))
             ax.add_patch(_body_patch(states[-1], role))
+        for role in recording.beliefs:  # where each learned player believed its opponent was, at the end
+            _draw_belief(ax, recording, role, i, end)
         if recording.captured[i]:
             ax.plot(*recording.evader[end, i, :2], "kx", ms=10, mew=2, zorder=6)
         ax.set_title(f"episode {i}: {_outcome(recording, i)}", fontsize=9)
@@ -139,6 +161,8 @@ def animate_episode(recording: Recording, path: str | Path, episode: int = 0, fp
             ax.plot(states[: t + 1, 0], states[: t + 1, 1], color=COLOURS[role], lw=1.0)
             ax.add_patch(_sensor_patch(states[t], role, recording, alpha=0.18 if seen[t] else 0.07))
             ax.add_patch(_body_patch(states[t], role))
+        for role in recording.beliefs:
+            _draw_belief(ax, recording, role, episode, t)
         if t == end and recording.captured[episode]:
             ax.plot(*evader[t, :2], "kx", ms=12, mew=2, zorder=6)
         ax.set_title(f"{recording.scenario.name}  t = {t * recording.scenario.dt:.1f} s   {_outcome(recording, episode)}"

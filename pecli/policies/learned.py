@@ -110,6 +110,16 @@ class LearnedPolicy:
             self._action[due] = self._forward(batch)
         return self._action.copy()
 
+    def current_belief(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The belief after the last :meth:`act`, for drawing: ``(weights (n, K), means (n, K, 2), stds (n, K, 2))``
+        in normalised world coordinates; ``None`` for a policy without a belief."""
+        belief = getattr(self.actor.features_extractor, "belief", None)
+        if belief is None or self._history is None:
+            return None
+        with th.no_grad():
+            mixture = belief.mixture(th.as_tensor(self._history.get()))
+        return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
+
     def _forward(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """SB3's ``Actor.forward`` without its preprocessing, which insists on the training-time keys
         (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window)."""

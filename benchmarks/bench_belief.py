@@ -1,0 +1,226 @@
+"""Beliefs: what they cost in training and how well they locate an unseen opponent.
+
+    python benchmarks/bench_belief.py speed      # (a) training transitions/s per belief kind, as a ratio to none
+    python benchmarks/bench_belief.py quality    # (b) unseen-position error on held-out games
+    python benchmarks/bench_belief.py capture    # (c) capture vs greedy and rash of the curve runs' checkpoints
+
+(a) trains the pursuer on the paper scenario with each ``--belief`` for the same number of
+transitions, with learning and belief fitting both active (warm-ups shortened), in one process
+on one torch thread, median of ``--repeats``.
+
+(b) collects history windows of a pure-pursuit pursuer against the random-walk, greedy and rash
+evaders, fits the BiMDN and the image belief on them by NLL (paper settings: batch 256, Adam
+0.002), then measures, on held-out games with other seeds, the mean distance (m) between each
+belief's mean and the evader's true position at the moments the pursuer does not see it: BiMDN,
+UKF, image, and "last seen" (the last sighting in the window; the arena's centre if none).
+
+(c) reads the curve runs of ``bench_train.py curves --belief KIND`` and, for each, takes the
+newest checkpoint the run had written within ``--minutes`` of CPU time (the run's evaluation log
+maps CPU time to steps), then plays it against the greedy and rash evaders (500 episodes, seed 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import torch as th  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+KINDS = ("none", "bimdn", "bimdn-mixed", "ukf", "image")
+
+
+def speed(args: argparse.Namespace) -> None:
+    from pecli.policies import resolve_policy
+    from pecli.rl.belief import BeliefVecEnv, FitBelief
+    from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
+    from pecli.scenario import load_scenario
+
+    base = load_scenario(args.config)
+    rates: dict[str, list[float]] = {kind: [] for kind in args.kinds}
+    for _ in range(args.repeats):
+        for kind in args.kinds:
+            scenario = with_overrides(base, {"belief": kind, "learning_starts": 1000, "belief_settings.warmup": 1000})
+            job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench")
+            env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
+            model = make_model(job, env, tensorboard=None)
+            callbacks = []
+            if isinstance(env, BeliefVecEnv):
+                belief = model.policy.actor.features_extractor.belief
+                env.set_belief(belief)
+                if env.buffer is not None:
+                    callbacks.append(FitBelief(belief, env.buffer, scenario.training.belief_settings, scenario.arena.half))
+            model.learn(1000, callback=callbacks)  # warm-ups over: learning and fitting both run below
+            start = time.perf_counter()
+            model.learn(args.steps, callback=callbacks, reset_num_timesteps=False)
+            rates[kind].append(args.steps / (time.perf_counter() - start))
+    reference = statistics.median(rates["none"]) if "none" in rates else None
+    print(f"{base.name}: {args.steps} transitions after warm-up, 8 envs, batch 512, 1 torch thread, "
+          f"median of {args.repeats}")
+    print("| belief | transitions/s | vs none |")
+    print("| --- | ---: | ---: |")
+    for kind, values in rates.items():
+        rate = statistics.median(values)
+        print(f"| {kind} | {rate:,.0f} | {rate / reference:.2f} |" if reference else f"| {kind} | {rate:,.0f} | - |")
+
+
+def _windows(scenario, evaders: list[str], games: int, seed: int):
+    """Windows of a pure-pursuit pursuer vs each evader: (history, true position, unseen) at every 10th step."""
+    from pecli.game import Game
+    from pecli.game.memory import HistoryWindow
+    from pecli.policies import resolve_policy
+
+    histories, targets, unseen = [], [], []
+    codec_seen = None
+    for k, name in enumerate(evaders):
+        game = Game(scenario, n=games, seed=seed + k)
+        obs = game.reset(seed=seed + k)
+        pursuer = resolve_policy("pure-pursuit", "pursuer", scenario, seed=seed + k)
+        evader = resolve_policy(name, "evader", scenario, seed=seed + 100 + k)
+        pursuer.reset(games)
+        evader.reset(games)
+        window = HistoryWindow(games, game.obs_dim["pursuer"])
+        window.reset(obs["pursuer"])
+        codec_seen = game.codecs["pursuer"].seen_index
+        for step in range(1, scenario.horizon + 1):
+            obs = game.step(pursuer.act(obs["pursuer"]), evader.act(obs["evader"])).obs
+            window.push(obs["pursuer"])
+            if step % 10 == 0:
+                live = ~game.finished
+                histories.append(window.get()[live])
+                targets.append(game.normalised_state()[live, 5:7])
+                unseen.append(obs["pursuer"][live, codec_seen] < 0)
+    return np.concatenate(histories), np.concatenate(targets), np.concatenate(unseen)
+
+
+def _last_seen(decoder, history: np.ndarray) -> np.ndarray:
+    window = decoder(history)
+    out = np.zeros((history.shape[0], 2))
+    for t in range(window.seen.shape[1]):  # later sightings overwrite earlier ones
+        seen = window.seen[:, t] & window.valid[:, t]
+        out[seen] = window.opp_pos[seen, t]
+    return out
+
+
+def quality(args: argparse.Namespace) -> None:
+    from pecli.belief.model import BeliefModel
+    from pecli.scenario import load_scenario
+
+    th.manual_seed(0)
+    scenario = load_scenario(args.config)
+    evaders = ["random-walk", "greedy", "rash"]
+    train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
+    test_x, test_y, test_unseen = _windows(scenario, evaders, args.games // 2, seed=1000)
+    half = np.array(scenario.arena.half)
+    settings = scenario.training.belief_settings
+    kwargs = {"window": (20, test_x.shape[1] // 20), "scenario": scenario.model_dump(mode="json"), "role": "pursuer"}
+    errors: dict[str, float] = {}
+    for kind in ("bimdn", "image", "ukf"):
+        model = BeliefModel(kind, **kwargs)
+        fit_seconds = 0.0
+        if model.learned:
+            optimiser = th.optim.Adam(model.parameters(), lr=settings.learning_rate)
+            rng = np.random.default_rng(0)
+            start = time.perf_counter()
+            for _ in range(args.updates):
+                index = rng.integers(0, len(train_x), settings.batch_size)
+                loss = model.mixture(th.as_tensor(train_x[index])).nll(th.as_tensor(train_y[index]))
+                optimiser.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(model.parameters(), settings.max_grad_norm)
+                optimiser.step()
+            fit_seconds = time.perf_counter() - start
+        with th.no_grad():
+            mean = np.concatenate([model.mixture(th.as_tensor(test_x[i:i + 2048])).mean().numpy()
+                                   for i in range(0, len(test_x), 2048)])
+        errors[kind] = float((np.linalg.norm((mean - test_y) * half, axis=1))[test_unseen].mean())
+        print(f"{kind}: fitted in {fit_seconds:.0f} s" if model.learned else f"{kind}: no fitting")
+    decoder = BeliefModel("ukf", **kwargs).decoder
+    errors["last seen"] = float(np.linalg.norm((_last_seen(decoder, test_x) - test_y) * half, axis=1)[test_unseen].mean())
+    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {len(train_x)} training windows, "
+          f"{int(test_unseen.sum())} held-out unseen moments; {args.updates} updates of batch {settings.batch_size}")
+    print("| belief | mean unseen-position error (m) |")
+    print("| --- | ---: |")
+    for kind, error in sorted(errors.items(), key=lambda item: item[1]):
+        print(f"| {kind} | {error:.2f} |")
+
+
+def _checkpoint_within(run: Path, minutes: float) -> tuple[Path, float] | None:
+    """The newest checkpoint of ``run`` written within ``minutes`` of CPU time, and that CPU time."""
+    import csv
+
+    from pecli.zoo import read_metadata
+
+    rows = list(csv.DictReader((run / "eval_pursuer.csv").open()))
+    budget = [(int(r["steps"]), float(r["cpu_seconds"]) / 60) for r in rows if float(r["cpu_seconds"]) <= 60 * minutes]
+    if not budget:
+        return None
+    steps, used = budget[-1]
+    best = None
+    for path in (run / "pursuer").glob("*.zip"):
+        taken = read_metadata(path).steps
+        if taken <= steps and (best is None or taken > best[1]):
+            best = (path, taken)
+    return None if best is None else (best[0], used * best[1] / max(steps, 1))
+
+
+def capture(args: argparse.Namespace) -> None:
+    from pecli.match import play_match
+    from pecli.policies import resolve_policy
+    from pecli.scenario import load_scenario
+
+    scenario = load_scenario(args.config)
+    curves = ROOT / "runs" / "bench_train"
+    print(f"checkpoints within {args.minutes:g} CPU-minutes of training, 500 episodes each, seed 0")
+    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |")
+    print("| --- | ---: | --- | ---: | ---: | ---: |")
+    summary: dict[str, list[tuple[float, float]]] = {}
+    for kind in args.kinds:
+        for run in sorted(curves.glob(f"{args.config}-{kind}-s*")):
+            found = _checkpoint_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else None
+            if found is None:
+                continue
+            checkpoint, minutes = found
+            rates = []
+            for evader in ("greedy", "rash"):
+                result, _ = play_match(scenario, resolve_policy(str(checkpoint), "pursuer", scenario),
+                                       resolve_policy(evader, "evader", scenario), episodes=500, seed=0)
+                rates.append(result.capture_rate)
+            summary.setdefault(kind, []).append((rates[0], rates[1]))
+            seed = run.name.rsplit("-s", 1)[1]
+            print(f"| {kind} | {seed} | {checkpoint.stem} | {minutes:.1f} | {rates[0]:.3f} | {rates[1]:.3f} |")
+    for kind, values in summary.items():
+        greedy = statistics.median(v[0] for v in values)
+        rash = statistics.median(v[1] for v in values)
+        print(f"median {kind}: greedy {greedy:.3f}, rash {rash:.3f} ({len(values)} seeds)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="step", required=True)
+    s = sub.add_parser("speed")
+    s.add_argument("--config", default="paper")
+    s.add_argument("--kinds", nargs="+", default=list(KINDS))
+    s.add_argument("--steps", type=int, default=4000)
+    s.add_argument("--repeats", type=int, default=3)
+    q = sub.add_parser("quality")
+    q.add_argument("--config", default="paper")
+    q.add_argument("--games", type=int, default=400)
+    q.add_argument("--updates", type=int, default=1500)
+    c = sub.add_parser("capture")
+    c.add_argument("--config", default="paper")
+    c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])
+    c.add_argument("--minutes", type=float, default=10.0)
+    args = parser.parse_args()
+    th.set_num_threads(1)
+    {"speed": speed, "quality": quality, "capture": capture}[args.step](args)
+
+
+if __name__ == "__main__":
+    main()

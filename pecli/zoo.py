@@ -181,3 +181,57 @@ class Run:
         with atomic_path(path) as tmp:
             model.save_replay_buffer(tmp)
         return path
+
+
+@dataclass
+class CheckpointEntry:
+    """One checkpoint file found in a zoo, with its metadata or the reason it has none."""
+
+    path: Path
+    meta: CheckpointMeta | None
+    problem: str = ""
+
+
+def runs_in(zoo: Path) -> list[Run]:
+    """Every run folder (one with a ``config.yaml``) under ``zoo``, sorted by name."""
+    if (zoo / "config.yaml").is_file():
+        return [Run(zoo)]
+    return [Run(p.parent) for p in sorted(zoo.glob("*/config.yaml"))]
+
+
+def checkpoints_in(run: Run) -> list[CheckpointEntry]:
+    """The checkpoints of a run, each with its metadata; damaged ones say why."""
+    import zipfile
+
+    entries = []
+    for path in sorted(run.path.glob("*/*.zip")):
+        if not metadata_path(path).is_file():
+            entries.append(CheckpointEntry(path, None, "no metadata"))
+            continue
+        try:
+            meta = read_metadata(path)
+        except ZooError:
+            entries.append(CheckpointEntry(path, None, "damaged metadata"))
+            continue
+        problem = "" if zipfile.is_zipfile(path) else "damaged zip"
+        entries.append(CheckpointEntry(path, meta, problem))
+    return entries
+
+
+def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
+    """Ratings of checkpoints from the tournaments under ``zoo`` (``*/results.json``), by resolved path.
+
+    When several tournaments rated a checkpoint, the newest results file wins.
+    """
+    found: dict[str, dict[str, Any]] = {}
+    files = sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime)
+    for results in files:
+        try:
+            data = json.loads(results.read_text())
+        except (json.JSONDecodeError, OSError):
+            continue
+        for rating in data.get("ratings", []):
+            spec = Path(rating.get("spec", ""))
+            if spec.suffix == ".zip":
+                found[str(spec.resolve())] = {**rating, "results": str(results)}
+    return found

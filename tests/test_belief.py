@@ -161,3 +161,13 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
         obs = game.step(actions, np.zeros((3, 2))).obs
     extractor = policy.actor.features_extractor
     assert extractor.belief.kind == "bimdn" and extractor.belief.net.lstm.hidden_size == 16
+
+    from pecli.game.render import draw_episodes
+    from pecli.match import play_match
+
+    result, recording = play_match(scenario, policy, resolve_policy("greedy", "evader", scenario), 4, seed=1, record=2)
+    weights, means, stds = recording.beliefs["pursuer"]
+    frames = recording.pursuer.shape[0]
+    assert weights.shape == (frames, 2, 3) and means.shape == (frames, 2, 3, 2) and stds.shape == (frames, 2, 3, 2)
+    assert "evader" not in recording.beliefs  # the greedy evader has no belief
+    assert draw_episodes(recording, tmp_path / "beliefs.png").stat().st_size > 1000

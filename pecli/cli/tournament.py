@@ -51,9 +51,11 @@ def tournament(
         typer.Option("--sample", help="Each checkpoint against M random opponents (the paper uses 32) instead of the grid."),
     ] = None,
     workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing pairings.")] = min(2, os.cpu_count() or 1),
-    out: Annotated[Path, typer.Option("--out", help="Folder for results, reports and the pairing cache.")] = Path(
-        "runs/tournament"
-    ),
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Folder for results, reports and the pairing cache "
+                     "(default: <first folder>/tournament, else runs/tournament)."),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Reuse the pairings already played in --out.")] = False,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the --sample draw.")] = 0,
@@ -73,6 +75,8 @@ def tournament(
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []
+    if out is None:
+        out = Path(paths[0]) / "tournament" if paths and Path(paths[0]).is_dir() else Path("runs/tournament")
     if not paths and not baselines:
         raise PecliError("nothing to play: give zoo folders or checkpoints, and/or --baselines")
     cache = out / "pairings"

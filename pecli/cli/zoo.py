@@ -1,0 +1,103 @@
+"""``pecli zoo``: list, show, remove and pick checkpoints of a zoo."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from pecli.cli.common import console, err_console, user_errors
+from pecli.errors import PecliError
+
+app = typer.Typer(help="List, show, remove and pick checkpoints of a zoo.", no_args_is_help=True)
+
+ZooArgument = Annotated[Path, typer.Argument(help="The zoo folder (or one run folder).")]
+
+
+@app.command("list")
+@user_errors
+def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
+    """Runs and checkpoints as a table, with tournament ratings where a tournament rated them."""
+    from pecli.zoo import checkpoints_in, runs_in, tournament_ratings
+
+    if not zoo.is_dir():
+        raise PecliError(f"no zoo at {zoo}")
+    runs = runs_in(zoo)
+    if not runs:
+        console.print(f"{zoo}: no runs yet (train one with `pecli train`)")
+        return
+    ratings = tournament_ratings(zoo)
+    table = Table(title=f"zoo {zoo}")
+    for column in ("run", "role", "checkpoint", "steps", "episodes", "algo", "belief", "scenario", "rating"):
+        table.add_column(column, justify="right" if column in ("steps", "episodes", "rating") else "left")
+    for run in runs:
+        for entry in checkpoints_in(run):
+            meta = entry.meta
+            if meta is None or entry.problem:
+                table.add_row(run.name, entry.path.parent.name, entry.path.stem, *[""] * 5, f"[red]{entry.problem}[/]")
+                continue
+            rated = ratings.get(str(entry.path.resolve()))
+            rating = f"{rated['elo']:.0f} ± {rated['stderr']:.0f}" if rated else ""
+            table.add_row(run.name, meta.role, entry.path.stem, f"{meta.steps:,}", str(meta.episodes), meta.algo,
+                          meta.belief, meta.scenario, rating)
+    console.print(table)
+
+
+@app.command("show")
+@user_errors
+def show(checkpoint: Annotated[Path, typer.Argument(help="A checkpoint file (.zip).")]) -> None:
+    """Print a checkpoint's metadata (and lineage, for self-play checkpoints) as JSON."""
+    from pecli.zoo import read_metadata
+
+    if not checkpoint.is_file():
+        raise PecliError(f"no checkpoint at {checkpoint}")
+    console.print_json(json.dumps(read_metadata(checkpoint).to_dict()))
+
+
+@app.command("rm")
+@user_errors
+def remove(
+    target: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask for confirmation.")] = False,
+) -> None:
+    """Delete a run (its folder) or one checkpoint (the zip and its metadata)."""
+    from pecli.zoo import metadata_path
+
+    if target.is_dir():
+        if not (target / "config.yaml").is_file():
+            raise PecliError(f"{target} is not a run folder (no config.yaml): refusing to delete it")
+        what = f"run {target} and everything in it"
+    elif target.is_file() and target.suffix == ".zip":
+        what = f"checkpoint {target}"
+    else:
+        raise PecliError(f"nothing to delete at {target} (give a run folder or a checkpoint .zip)")
+    if not yes and not typer.confirm(f"Delete {what}?", err=True):
+        raise typer.Exit(code=1)
+    if target.is_dir():
+        shutil.rmtree(target)
+    else:
+        target.unlink()
+        metadata_path(target).unlink(missing_ok=True)
+    err_console.print(f"deleted {what}", highlight=False)
+
+
+@app.command("best")
+@user_errors
+def best(
+    role: Annotated[str, typer.Argument(help="pursuer or evader.")],
+    zoo: ZooArgument = Path("zoo"),
+) -> None:
+    """Print the path of the highest-rated checkpoint of ROLE (from the zoo's tournament results)."""
+    from pecli.zoo import tournament_ratings
+
+    if role not in ("pursuer", "evader"):
+        raise PecliError(f"role must be pursuer or evader, not '{role}'")
+    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and Path(path).is_file()]
+    if not rated:
+        raise PecliError(f"no rated {role} checkpoint in {zoo}: run `pecli tournament {zoo}` first")
+    top = max(rated, key=lambda r: r["elo"])
+    typer.echo(Path(top["spec"]))

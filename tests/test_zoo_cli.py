@@ -1,0 +1,85 @@
+"""`pecli zoo` on an empty, a normal and a damaged zoo; `best` after a tournament; `rm`."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from pathlib import Path
+from unittest import mock
+
+import pytest
+from typer.testing import CliRunner
+
+from pecli.cli import app
+
+runner = CliRunner()
+TINY = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
+        "--set", "net_arch=[16, 16]", "--set", "checkpoint_every=4", "--set", "n_envs=4", "--steps", "800", "-q"]
+
+
+def invoke(*args: str):
+    with mock.patch.object(sys, "argv", ["pecli", *args]):
+        return runner.invoke(app, list(args))
+
+
+@pytest.fixture(scope="module")
+def zoo(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("zoo")
+    for role, name in (("pursuer", "p"), ("evader", "e")):
+        result = invoke("train", role, "-c", "quick", "--zoo", str(root), "--name", name, *TINY)
+        assert result.exit_code == 0, result.output
+    return root
+
+
+def test_empty_and_missing_zoos(tmp_path: Path) -> None:
+    result = invoke("zoo", "list", str(tmp_path))
+    assert result.exit_code == 0 and "no runs yet" in result.output
+    result = invoke("zoo", "list", str(tmp_path / "nope"))
+    assert result.exit_code == 1 and "no zoo at" in result.output
+
+
+def test_list_and_show(zoo: Path) -> None:
+    result = invoke("zoo", "list", str(zoo))
+    assert result.exit_code == 0 and "final" in result.output and "evader" in result.output
+    shown = invoke("zoo", "show", str(zoo / "p" / "pursuer" / "final.zip"))
+    assert shown.exit_code == 0 and '"role": "pursuer"' in shown.output and '"steps": 800' in shown.output
+
+
+def test_a_damaged_zoo_is_listed_without_a_traceback(zoo: Path, tmp_path: Path, monkeypatch) -> None:
+    from pecli.cli.common import console
+
+    monkeypatch.setattr(console, "width", 200)  # no wrapping inside the table's cells
+    damaged = tmp_path / "zoo"
+    shutil.copytree(zoo / "p", damaged / "p")
+    (damaged / "p" / "pursuer" / "final.json").unlink()  # a checkpoint without metadata
+    last = damaged / "p" / "pursuer" / "last.zip"
+    last.write_bytes(last.read_bytes()[:300])  # a truncated zip
+    result = invoke("zoo", "list", str(damaged))
+    assert result.exit_code == 0, result.output
+    assert "no metadata" in result.output and "damaged zip" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_best_needs_a_tournament_then_names_the_top_checkpoint(zoo: Path) -> None:
+    result = invoke("zoo", "best", "pursuer", str(zoo))
+    assert result.exit_code == 1 and "run `pecli tournament" in result.output
+    played = invoke("tournament", str(zoo), "--baselines", "-c", "quick", "-n", "10", "--seeds", "1", "-w", "1")
+    assert played.exit_code == 0, played.output
+    assert (zoo / "tournament" / "results.json").is_file()  # the default --out of a zoo
+    best = invoke("zoo", "best", "pursuer", str(zoo))
+    assert best.exit_code == 0 and best.output.strip().endswith(".zip") and "/p/pursuer/" in best.output
+    listed = invoke("zoo", "list", str(zoo))
+    assert "±" in listed.output  # ratings show up in the list
+    assert invoke("zoo", "best", "referee", str(zoo)).exit_code == 1
+
+
+def test_rm_asks_and_deletes(zoo: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo / "e", copy / "e")
+    checkpoint = copy / "e" / "evader" / "final.zip"
+    refused = runner.invoke(app, ["zoo", "rm", str(checkpoint)], input="n\n")
+    assert refused.exit_code == 1 and checkpoint.exists()
+    deleted = runner.invoke(app, ["zoo", "rm", str(checkpoint)], input="y\n")
+    assert deleted.exit_code == 0 and not checkpoint.exists() and not checkpoint.with_suffix(".json").exists()
+    assert invoke("zoo", "rm", str(copy / "e"), "--yes").exit_code == 0 and not (copy / "e").exists()
+    assert invoke("zoo", "rm", str(tmp_path)).exit_code == 1  # not a run folder

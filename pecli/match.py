@@ -110,7 +110,7 @@ def play_match(
         frames.append((game.state()[:record], {k: v[:record] for k, v in game.seen().items()}))
     for step in range(1, scenario.horizon + 1):
         pursuer_action, evader_action = pursuer.act(obs["pursuer"]), evader.act(obs["evader"])
-        if record:  # each player's belief about the current frame, which its action just used
+        if record:  # each player's belief given its window at the current frame
             _record_beliefs(beliefs, pursuer, evader, record)
         result = game.step(pursuer_action, evader_action)
         captured |= result.captured
@@ -144,9 +144,9 @@ def _record_beliefs(beliefs: dict[str, list], pursuer: Policy, evader: Policy, r
     """Append the current beliefs of the players that have one (their ``current_belief()``)."""
     for role, policy in (("pursuer", pursuer), ("evader", evader)):
         current = getattr(policy, "current_belief", None)
-        belief = current() if current is not None else None
+        belief = current(record) if current is not None else None
         if belief is not None:
-            beliefs.setdefault(role, []).append(tuple(part[:record] for part in belief))
+            beliefs.setdefault(role, []).append(belief)
 
 
 def _stack_beliefs(items: list, frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,13 +15,15 @@ from __future__ import annotations
 import hashlib
 import json
 import random
+import zipfile
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json
 from pecli.match import play_match
@@ -86,11 +88,22 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
     except ZooError as exc:
         skipped.append(str(exc))
         return None
+    if not zipfile.is_zipfile(path):
+        skipped.append(f"{path}: damaged checkpoint (truncated or not a zip)")
+        return None
     if meta.scenario_hash != scenario.fingerprint():
         skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")
         return None
-    name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else str(path.with_suffix(""))
-    return Player(name=name, spec=str(path), role=meta.role, identity=_file_hash(path))
+    name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
+    return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=_file_hash(path))
+
+
+def _unique_names(players: list[Player]) -> list[Player]:
+    """Players whose names collide (two runs of one name in two zoos) get their path instead."""
+    counts: dict[str, int] = {}
+    for player in players:
+        counts[player.name] = counts.get(player.name, 0) + 1
+    return [replace(p, name=str(Path(p.spec).with_suffix(""))) if counts[p.name] > 1 else p for p in players]
 
 
 def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:
@@ -126,6 +139,7 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
         if not players[role]:
             hint = "" if baselines else " (add --baselines to include the built-in heuristics)"
             raise PecliError(f"no {role} to play: the tournament needs at least one of each side{hint}")
+        players[role] = _unique_names(players[role])
     return Discovery(players=players, skipped=skipped)
 
 
@@ -165,12 +179,14 @@ def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed:
             for opponent in rng.sample(other, min(sample, len(other))):
                 pair = (player, opponent) if role == "pursuer" else (opponent, player)
                 chosen.add((pair[0].identity, pair[1].identity))
+    if not chosen:
+        raise PecliError("--sample draws opponents for checkpoints only, and there are none: play the full grid")
     return [(p, e) for e in evaders for p in pursuers if (p.identity, e.identity) in chosen]
 
 
 def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> str:
     """Cache key of a pairing: everything that decides its outcome."""
-    text = json.dumps([scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
+    text = json.dumps([__version__, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -179,9 +195,9 @@ def play_pairing(scenario: Scenario, pursuer: Player, evader: Player, episodes: 
     import numpy as np
 
     captured, times = [], []
-    for seed in seeds:
-        p = resolve_policy(pursuer.spec, "pursuer", scenario, seed=seed)
-        e = resolve_policy(evader.spec, "evader", scenario, seed=seed)
+    p = resolve_policy(pursuer.spec, "pursuer", scenario)
+    e = resolve_policy(evader.spec, "evader", scenario)
+    for seed in seeds:  # play_match reseeds both policies from the seed
         result, _ = play_match(scenario, p, e, episodes=episodes, seed=seed)
         captured.append(result.captured)
         times.append(result.time_to_capture)
@@ -194,6 +210,17 @@ def play_pairing(scenario: Scenario, pursuer: Player, evader: Player, episodes: 
         time_to_capture_mean=float(all_times.mean()),
         time_to_capture_std=float(all_times.std()),
     )
+
+
+def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None:
+    """A cached pairing result, or ``None`` if there is none or it is unreadable (then it is played again)."""
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        return PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
+    except (json.JSONDecodeError, TypeError, OSError):
+        return None
 
 
 def _worker_init() -> None:
@@ -254,8 +281,9 @@ def _role_of(players: dict[Role, list[Player]], name: str) -> Role:
 
 
 def rate(players: dict[Role, list[Player]], pairings: Sequence[PairingResult]) -> list[Rating]:
-    """Bradley–Terry ratings of every player from all its results (a capture is a pursuer's win)."""
-    names = [p.name for role in ROLES for p in players[role]]
+    """Bradley–Terry ratings of every player that played, from all its results (a capture is a pursuer's win)."""
+    played = {r.pursuer for r in pairings} | {r.evader for r in pairings}
+    names = [p.name for role in ROLES for p in players[role] if p.name in played]
     index = {name: i for i, name in enumerate(names)}
     results = [(index[r.pursuer], index[r.evader], r.captures, r.episodes) for r in pairings]
     return sorted(bradley_terry(names, results), key=lambda r: -r.elo)
@@ -278,10 +306,8 @@ def run_tournament(
     todo: list[tuple[str, tuple]] = []
     for pursuer, evader in pairings:
         key = pairing_key(scenario, pursuer, evader, episodes, seeds)
-        cached = cache / f"{key}.json"
-        if cached.is_file():
-            data = json.loads(cached.read_text())
-            result = PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
+        result = _cached(cache / f"{key}.json", pursuer, evader)
+        if result is not None:
             results[key] = result
             if on_result is not None:
                 on_result(result, True)
@@ -294,14 +320,25 @@ def run_tournament(
         if on_result is not None:
             on_result(result, False)
 
+    failures: list[str] = []
     if workers > 1 and len(todo) > 1:
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init) as pool:
             futures = {pool.submit(_play_job, job): key for key, job in todo}
             for future in as_completed(futures):
-                finish(futures[future], future.result())
+                try:
+                    finish(futures[future], future.result())
+                except PecliError as exc:  # keep playing the others; each finished pairing is cached
+                    failures.append(str(exc))
     else:
+        _worker_init()
         for key, job in todo:
-            finish(key, _play_job(job))
+            try:
+                finish(key, _play_job(job))
+            except PecliError as exc:
+                failures.append(str(exc))
+    if failures:
+        more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
+        raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")
     ordered = [results[pairing_key(scenario, p, e, episodes, seeds)] for p, e in pairings]
     return TournamentResults(
         scenario=scenario, players=players, pairings=ordered, ratings=rate(players, ordered),

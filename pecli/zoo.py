@@ -85,7 +85,10 @@ def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
     if not path.is_file():
         raise ZooError(f"{checkpoint}: no metadata file {path.name} beside it (is this a pecli checkpoint?)")
     try:
-        return CheckpointMeta.from_dict(json.loads(path.read_text()))
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict):
+            raise TypeError("not a JSON object")
+        return CheckpointMeta.from_dict(data)
     except (json.JSONDecodeError, TypeError, OSError) as exc:
         raise ZooError(f"{path}: damaged metadata ({exc})") from None
 
@@ -148,7 +151,11 @@ class Run:
     def scenario(self) -> Scenario:
         """The resolved scenario the run was started with."""
         source = self.path / "config.yaml"
-        return scenario_from_dict(yaml.safe_load(source.read_text()), source=str(source))
+        try:
+            data = yaml.safe_load(source.read_text())
+        except (yaml.YAMLError, OSError) as exc:
+            raise ZooError(f"{source}: damaged run config ({exc.__class__.__name__})") from None
+        return scenario_from_dict(data, source=str(source))
 
     def log_command(self) -> None:
         """Append the current command to ``command.txt``."""
@@ -219,19 +226,24 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
 
 
 def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
-    """Ratings of checkpoints from the tournaments under ``zoo`` (``*/results.json``), by resolved path.
+    """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
 
-    When several tournaments rated a checkpoint, the newest results file wins.
+    Ratings of different tournaments sit on different scales, so only one tournament is used.
+    Keys are resolved checkpoint paths.
     """
-    found: dict[str, dict[str, Any]] = {}
-    files = sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime)
-    for results in files:
+    for results in sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime, reverse=True):
         try:
             data = json.loads(results.read_text())
-        except (json.JSONDecodeError, OSError):
+            ratings = data["ratings"] if isinstance(data, dict) else None
+        except (json.JSONDecodeError, OSError, KeyError):
             continue
-        for rating in data.get("ratings", []):
-            spec = Path(rating.get("spec", ""))
+        if not isinstance(ratings, list):
+            continue
+        found = {}
+        for rating in ratings:
+            spec = Path(rating.get("spec", "")) if isinstance(rating, dict) else Path()
             if spec.suffix == ".zip":
-                found[str(spec.resolve())] = {**rating, "results": str(results)}
-    return found
+                path = spec if spec.is_absolute() else results.parent / spec
+                found[str(path.resolve())] = {**rating, "spec": str(path), "results": str(results)}
+        return found
+    return {}

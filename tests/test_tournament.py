@@ -100,3 +100,40 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     ):
         result = runner.invoke(app, args)
         assert result.exit_code == 1 and message in result.output and "Traceback" not in result.output
+
+
+def test_only_players_with_games_are_rated(quick: Scenario, tmp_path: Path) -> None:
+    from pecli.tournament import rate
+
+    players = baselines(quick)
+    subset = [(players["pursuer"][0], players["evader"][0])]
+    results = run_tournament(quick, players, subset, episodes=20, seeds=[0], out=tmp_path)
+    assert {r.name for r in results.ratings} == {"pure-pursuit", "random-walk"}
+    assert rate(players, []) == []
+
+
+def test_a_damaged_cache_entry_is_played_again(quick: Scenario, tmp_path: Path) -> None:
+    players = baselines(quick)
+    pairings = schedule(players)[:1]
+    run_tournament(quick, players, pairings, episodes=10, seeds=[0], out=tmp_path)
+    for entry in (tmp_path / "pairings").iterdir():
+        entry.write_text("{truncated")
+    cached: list[bool] = []
+    run_tournament(quick, players, pairings, episodes=10, seeds=[0], out=tmp_path,
+                   on_result=lambda result, was_cached: cached.append(was_cached))
+    assert cached == [False]
+
+
+def test_colliding_names_become_paths() -> None:
+    from pecli.tournament import _unique_names
+
+    a = Player(name="ours/pursuer/final", spec="/z1/ours/pursuer/final.zip", role="pursuer", identity="1")
+    b = Player(name="ours/pursuer/final", spec="/z2/ours/pursuer/final.zip", role="pursuer", identity="2")
+    c = Player(name="other/pursuer/final", spec="/z2/other/pursuer/final.zip", role="pursuer", identity="3")
+    names = [p.name for p in _unique_names([a, b, c])]
+    assert names == ["/z1/ours/pursuer/final", "/z2/ours/pursuer/final", "other/pursuer/final"]
+
+
+def test_sampling_without_checkpoints_is_refused(quick: Scenario) -> None:
+    with pytest.raises(PecliError, match="--sample draws opponents for checkpoints only"):
+        schedule(baselines(quick), sample=4)

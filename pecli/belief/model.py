@@ -18,6 +18,7 @@ import numpy as np
 import torch as th
 from torch import nn
 
+from pecli.belief import BELIEF_KINDS
 from pecli.belief.bimdn import BiMDN
 from pecli.belief.mixture import Mixture
 from pecli.belief.window import WindowDecoder
@@ -25,6 +26,11 @@ from pecli.roles import Role
 from pecli.scenario import scenario_from_dict
 
 LEARNED_KINDS = ("bimdn", "bimdn-mixed", "image")
+
+
+def features_dim(kind: str, samples: int) -> int:
+    """How many numbers a belief of ``kind`` adds to the actor's input."""
+    return 2 * samples if kind == "bimdn-mixed" else 2
 
 
 class BeliefModel(nn.Module):
@@ -51,7 +57,7 @@ class BeliefModel(nn.Module):
         samples: int = 16,
     ) -> None:
         super().__init__()
-        if kind not in ("bimdn", "bimdn-mixed", "ukf", "image"):
+        if kind not in BELIEF_KINDS or kind == "none":
             raise ValueError(f"unknown belief kind {kind!r}")
         self.kind, self.window, self.samples = kind, tuple(window), samples
         self.decoder = WindowDecoder(scenario_from_dict(scenario), role)
@@ -75,13 +81,13 @@ class BeliefModel(nn.Module):
 
     @property
     def features_dim(self) -> int:
-        return 2 * self.samples if self.kind == "bimdn-mixed" else 2
+        return features_dim(self.kind, self.samples)
 
     def mixture(self, history: th.Tensor) -> Mixture:
         """The belief for flattened windows ``(B, samples * dim)``."""
         if self.net is None:
             return self.ukf(history.detach().cpu().numpy())
-        return self.net(history.view(history.shape[0], *self.window))
+        return self.net(history.reshape(history.shape[0], *self.window))
 
     @th.no_grad()
     def features(self, history: th.Tensor) -> th.Tensor:

@@ -47,6 +47,9 @@ class LearnedPolicy:
         self.meta = meta
         self.n = 0
         self._fresh = np.zeros(0, dtype=bool)
+        self._history: HistoryWindow | None = None
+        self._generator: th.Generator | None = None
+        self._belief = getattr(actor.features_extractor, "belief", None)
 
     @classmethod
     def load(cls, path: str | Path, role: Role, scenario: Scenario, seed: int | None = None) -> LearnedPolicy:
@@ -70,16 +73,15 @@ class LearnedPolicy:
         return cls(model.policy.actor, role, scenario, meta)
 
     def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
-        belief = getattr(getattr(self.actor, "features_extractor", None), "belief", None)
-        if seed is not None and belief is not None:  # the draws of a mixed belief follow the seed
-            belief.generator = th.Generator().manual_seed(seed)
+        if seed is not None:  # the draws of a mixed belief follow the seed
+            self._generator = th.Generator().manual_seed(seed)
         if mask is None or n != self.n:
             self.n = n
             self._fresh = np.ones(n, dtype=bool)
             self._clock = np.zeros(n, dtype=np.int64)
             self._action = np.zeros((n, 2), dtype=np.float32)
             self._stack: FrameStack | None = None
-            self._history: HistoryWindow | None = None
+            self._history = None
         else:
             self._fresh |= np.asarray(mask, dtype=bool)
 
@@ -110,22 +112,28 @@ class LearnedPolicy:
             self._action[due] = self._forward(batch)
         return self._action.copy()
 
-    def current_belief(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The belief after the last :meth:`act`, for drawing: ``(weights (n, K), means (n, K, 2), stds (n, K, 2))``
-        in normalised world coordinates; ``None`` for a policy without a belief."""
-        belief = getattr(self.actor.features_extractor, "belief", None)
-        if belief is None or self._history is None:
+    def current_belief(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The belief given the window of the last :meth:`act`, for drawing, for the first ``games`` games:
+        ``(weights (g, K), means (g, K, 2), stds (g, K, 2))`` in normalised world coordinates;
+        ``None`` for a policy without a belief."""
+        if self._belief is None or self._history is None:
             return None
         with th.no_grad():
-            mixture = belief.mixture(th.as_tensor(self._history.get()))
+            mixture = self._belief.mixture(th.as_tensor(self._history.get()[:games]))
         return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
 
     def _forward(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """SB3's ``Actor.forward`` without its preprocessing, which insists on the training-time keys
         (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window)."""
-        with th.no_grad():
-            features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
-            return self.actor.mu(features).numpy()
+        if self._belief is not None:  # this policy's draws; the model may be shared with a learner
+            previous, self._belief.generator = self._belief.generator, self._generator
+        try:
+            with th.no_grad():
+                features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
+                return self.actor.mu(features).numpy()
+        finally:
+            if self._belief is not None:
+                self._belief.generator = previous
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"

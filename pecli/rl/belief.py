@@ -37,10 +37,11 @@ class BeliefBuffer:
         self.rng = np.random.default_rng(seed)
 
     def add(self, history: np.ndarray, target: np.ndarray, unseen: np.ndarray) -> None:
-        for i in range(history.shape[0]):
-            self.history[self.cursor], self.target[self.cursor], self.unseen[self.cursor] = history[i], target[i], unseen[i]
-            self.cursor = (self.cursor + 1) % self.capacity
-            self.size = min(self.size + 1, self.capacity)
+        """Append ``n`` pairs (rows of each array), overwriting the oldest when full."""
+        rows = (self.cursor + np.arange(history.shape[0])) % self.capacity
+        self.history[rows], self.target[rows], self.unseen[rows] = history, target, unseen
+        self.cursor = int((self.cursor + history.shape[0]) % self.capacity)
+        self.size = min(self.size + history.shape[0], self.capacity)
 
     def sample(self, batch: int) -> tuple[th.Tensor, th.Tensor, np.ndarray]:
         index = self.rng.integers(0, self.size, size=batch)
@@ -93,8 +94,7 @@ class BeliefVecEnv(VecEnvWrapper):
         history = obs.pop("history")
         obs["belief"] = self.belief.features_numpy(history)
         if record and self.buffer is not None:
-            unseen = np.atleast_2d(obs["obs"])[:, self._seen_index] < 0
-            self.buffer.add(np.atleast_2d(history), np.atleast_2d(obs["state"])[:, self._target], unseen)
+            self.buffer.add(history, obs["state"][:, self._target], obs["obs"][:, self._seen_index] < 0)
         return obs
 
     def reset(self) -> dict[str, np.ndarray]:
@@ -102,11 +102,12 @@ class BeliefVecEnv(VecEnvWrapper):
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.venv.step_wait()
-        for info in infos:
-            terminal = info.get("terminal_observation")
-            if terminal is not None:
-                batch = {key: value[None] for key, value in terminal.items()}
-                info["terminal_observation"] = {key: value[0] for key, value in self._convert(batch, record=False).items()}
+        ended = [info for info in infos if "terminal_observation" in info]
+        if ended:  # one batched belief pass for every game that ended this step
+            batch = {key: np.stack([info["terminal_observation"][key] for info in ended]) for key in ended[0]["terminal_observation"]}
+            converted = self._convert(batch, record=False)
+            for j, info in enumerate(ended):
+                info["terminal_observation"] = {key: value[j] for key, value in converted.items()}
         return self._convert(obs, record=True), rewards, dones, infos
 
 

@@ -23,7 +23,7 @@ from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy, algorithm_class
-from pecli.belief.model import LEARNED_KINDS
+from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
@@ -125,10 +125,10 @@ def _meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
 def belief_kwargs(job: TrainJob) -> dict[str, Any]:
     """Keyword arguments of the actor's :class:`BeliefModel` for this job."""
     t, b = job.scenario.training, job.scenario.training.belief_settings
-    samples = -(-t.history_length // t.history_stride)
+    window_length = -(-t.history_length // t.history_stride)  # observations in the window
     dim = _obs_dim(job.scenario, job.role)
     return {
-        "kind": t.belief, "window": (samples, dim), "scenario": job.scenario.model_dump(mode="json"),
+        "kind": t.belief, "window": (window_length, dim), "scenario": job.scenario.model_dump(mode="json"),
         "role": job.role, "hidden": b.hidden, "fc": b.fc, "components": b.components, "samples": b.samples,
     }
 
@@ -150,8 +150,7 @@ def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | 
     if t.belief in LEARNED_KINDS:
         window = view.observation_space["history"].shape[0]
         buffer = BeliefBuffer(t.belief_settings.buffer_size, window, seed=seed)
-    features = 2 * t.belief_settings.samples if t.belief == "bimdn-mixed" else 2
-    return BeliefVecEnv(view, features, buffer)
+    return BeliefVecEnv(view, features_dim(t.belief, t.belief_settings.samples), buffer)
 
 
 def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorboard: Path | None) -> Any:
@@ -251,7 +250,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         callbacks.insert(0, CurriculumCallback(job.scenario, schedule, t.curriculum.fraction))
-    if belief is not None and belief.learned and isinstance(env, BeliefVecEnv) and env.buffer is not None:
+    if belief is not None and belief.learned and env.buffer is not None:
         callbacks.append(FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half))
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]

@@ -90,10 +90,10 @@ def test_a_learned_policy_plays_exactly_as_in_its_training_view(quick: Scenario)
     scenario = tiny(quick)
     view = FrozenOpponentVecEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario), n=n, seed=seed)
     obs = view.reset()
-    from pecli.rl.train import _meta
+    from pecli.rl.train import checkpoint_meta
 
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="t")
-    learner = LearnedPolicy(model.policy.actor, "pursuer", scenario, _meta(job, model, 0))
+    learner = LearnedPolicy(model.policy.actor, "pursuer", scenario, checkpoint_meta(job, model, 0))
     greedy = resolve_policy("greedy", "evader", scenario)
     game = Game(scenario, n=n, seed=seed)
     game_obs = game.reset(seed=seed)

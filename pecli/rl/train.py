@@ -102,7 +102,8 @@ class TrainJob:
     curriculum_steps: int | None = None
 
 
-def _meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
+def checkpoint_meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
+    """The metadata written beside a checkpoint of ``model`` after ``episodes`` episodes."""
     t = job.scenario.training
     return CheckpointMeta(
         role=job.role,
@@ -185,7 +186,7 @@ def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     scenario = job.scenario
 
     def evaluate(model: Any) -> float:
-        learner = LearnedPolicy(model.policy.actor, job.role, scenario, _meta(job, model, 0))
+        learner = LearnedPolicy(model.policy.actor, job.role, scenario, checkpoint_meta(job, model, 0))
         other = resolve_policy(opponent, opponent_of(job.role), scenario, seed=job.seed)
         players = (learner, other) if job.role == "pursuer" else (other, learner)
         model.policy.set_training_mode(False)
@@ -242,7 +243,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     def checkpoint(total: int) -> None:
         nonlocal next_checkpoint
         while total >= next_checkpoint:
-            run.save(model, job.role, Run.episode_name(next_checkpoint), _meta(job, model, total))
+            run.save(model, job.role, Run.episode_name(next_checkpoint), checkpoint_meta(job, model, total))
             next_checkpoint += t.checkpoint_every
 
     stats.listeners.append(checkpoint)
@@ -266,16 +267,16 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
                 tb_log_name=job.role,
             )
     except KeyboardInterrupt:
-        last = run.save(model, job.role, LAST, _meta(job, model, stats.episodes))
+        last = run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
         run.save_replay_buffer(model, job.role)
         raise TrainingInterrupted(last) from None
     finally:
         logger = getattr(model, "_logger", None)
         if logger is not None:
             logger.close()
-    run.save(model, job.role, LAST, _meta(job, model, stats.episodes))
+    run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
     run.save_replay_buffer(model, job.role)
-    return run.save(model, job.role, FINAL, _meta(job, model, stats.episodes))
+    return run.save(model, job.role, FINAL, checkpoint_meta(job, model, stats.episodes))
 
 
 def default_run_name(role: Role, scenario: Scenario, seed: int) -> str:

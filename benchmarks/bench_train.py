@@ -152,9 +152,10 @@ def report(args: argparse.Namespace) -> None:
     for path in runs:
         cpu, rate = _read(path)
         ax.plot(cpu, rate, marker=".", label=path.parent.name)
+        finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
         for minutes in at:
-            if cpu.size and cpu[-1] >= minutes:
-                at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best checkpoint so far
+            if cpu.size and (cpu[-1] >= minutes or finished):
+                at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
     ax.axhline(0.9, color="0.6", ls="--", lw=0.8)
     ax.set_xlabel("CPU minutes (one torch thread)")
     ax.set_ylabel("capture rate vs greedy (200 episodes)")

@@ -138,6 +138,8 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
     for role in ROLES:
         if not players[role]:
             hint = "" if baselines else " (add --baselines to include the built-in heuristics)"
+            if skipped:
+                hint += f"; {len(skipped)} checkpoint(s) skipped, e.g. {skipped[0]}"
             raise PecliError(f"no {role} to play: the tournament needs at least one of each side{hint}")
         players[role] = _unique_names(players[role])
     return Discovery(players=players, skipped=skipped)

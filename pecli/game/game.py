@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pecli.game.dynamics import make_dynamics
-from pecli.game.observation import ObservationCodec, encode_state
+from pecli.game.observation import ObservationCodec
 from pecli.game.seeding import counter_uniform, fresh_seed
 from pecli.game.sensors import in_view
 from pecli.roles import ROLES, Role
@@ -72,6 +72,10 @@ class Game:
         self.fov: dict[Role, float] = {role: scenario.agent(role).sensor.fov for role in ROLES}
         self.speed_scale: dict[Role, float] = {role: 1.0 for role in ROLES}
         self._half = scenario.arena.half
+        # normalisation of the privileged state, per row (pursuer's rows then evader's)
+        self._state_inverse_scale = {
+            role: (1.0 / self.dynamics[role].scale(*self._half))[:, None] for role in ROLES
+        }
         # row-wise internal states (rows, n): the SI state, then any cached rows (a car's cos/sin psi)
         self.pursuer = np.zeros((self.dynamics["pursuer"].rows, n))
         self.evader = np.zeros((self.dynamics["evader"].rows, n))
@@ -88,7 +92,12 @@ class Game:
 
     def normalised_state(self) -> np.ndarray:
         """The full state scaled to [-1, 1], plus ``t/T``: ``(n, state_dim + 1)`` float32, for critics."""
-        return encode_state(self.scenario, self.pursuer, self.evader, self.t / self.scenario.horizon)
+        kp, ke = self.dynamics["pursuer"].state_dim, self.dynamics["evader"].state_dim
+        out = np.empty((kp + ke + 1, self.n), dtype=np.float32)
+        np.multiply(self.pursuer[:kp], self._state_inverse_scale["pursuer"], out=out[:kp])
+        np.multiply(self.evader[:ke], self._state_inverse_scale["evader"], out=out[kp : kp + ke])
+        out[-1] = self.t / self.scenario.horizon
+        return out.T
 
     def set_state(self, state: np.ndarray, t: np.ndarray | int = 0) -> dict[Role, np.ndarray]:
         """Put every game in the SI ``state`` ``(n, state_dim)`` at step ``t``; returns the observations."""

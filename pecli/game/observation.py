@@ -155,18 +155,3 @@ def _rotate(vectors: np.ndarray, angle: np.ndarray) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     x, y = vectors[:, 0], vectors[:, 1]
     return np.stack([c * x - s * y, s * x + c * y], axis=1)
-
-
-def encode_state(scenario: Scenario, pursuer: np.ndarray, evader: np.ndarray, time_fraction: np.ndarray) -> np.ndarray:
-    """The privileged full state scaled to [-1, 1] plus ``t/T``: ``(n, k_p + k_e + 1)`` float32.
-
-    ``pursuer`` and ``evader`` are row-wise states (SI units); extra cached rows are ignored.
-    """
-    half_x, half_y = scenario.arena.half
-    p, e = make_dynamics(scenario.pursuer), make_dynamics(scenario.evader)
-    kp, ke = p.state_dim, e.state_dim
-    out = np.empty((kp + ke + 1, pursuer.shape[1]), dtype=np.float32)
-    np.divide(pursuer[:kp], p.scale(half_x, half_y)[:, None], out=out[:kp])
-    np.divide(evader[:ke], e.scale(half_x, half_y)[:, None], out=out[kp : kp + ke])
-    out[-1] = time_fraction
-    return out.T

@@ -169,6 +169,26 @@ class BeliefSettings(_Model):
     max_grad_norm: float = Field(default=1.0, gt=0, description="(ours) gradient clipping of the belief's updates")
 
 
+class SelfPlay(_Model):
+    """Alternating self-play (``pecli selfplay``): each round trains the pursuer, then the evader,
+    against opponents drawn from the other side's pool."""
+
+    rounds: int = Field(default=10, ge=1, description="rounds; a round trains each side once")
+    steps_per_round: int = Field(default=50_000, ge=1, description="learner transitions per side per round")
+    opponents: Literal["latest", "uniform", "pfsp"] = Field(
+        default="pfsp",
+        description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win",
+    )
+    baselines: bool = Field(default=True, description="start each pool with the heuristic baselines")
+    pfsp_power: float = Field(default=2.0, gt=0, description="(ours) PFSP weight = P(opponent wins)^power")
+    pfsp_prior_episodes: float = Field(
+        default=10.0, gt=0, description="(ours) pseudo-episodes of the prior (a tournament's prediction, else 0.5)"
+    )
+    pfsp_decay: float = Field(
+        default=0.5, ge=0, le=1, description="(ours) share of an opponent's record kept when the learner moves on a round"
+    )
+
+
 class Training(_Model):
     """How a learner is trained (Stable-Baselines3 TD3/DDPG on a frozen-opponent view)."""
 
@@ -199,6 +219,7 @@ class Training(_Model):
     torch_threads: int = Field(default=1, ge=1, description="torch threads per process (1 is fastest on a shared CPU)")
     curriculum: Curriculum = Curriculum()
     belief_settings: BeliefSettings = BeliefSettings()
+    selfplay: SelfPlay = SelfPlay()
 
     @model_validator(mode="after")
     def _window_fits(self) -> Training:

@@ -62,6 +62,9 @@ class CheckpointMeta:
     history_stride: int
     run: str = ""
     seed: int = 0
+    round: int | None = None  # self-play: the round that produced it
+    parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
+    opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
     pecli_version: str = __version__
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -136,7 +139,7 @@ class Run:
         except OSError as exc:
             raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
         run = cls(path)
-        atomic_write_text(path / "config.yaml", yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
+        run.write_config(scenario)
         atomic_write_json(path / "versions.json", versions())
         run.log_command()
         return run
@@ -156,6 +159,10 @@ class Run:
         except (yaml.YAMLError, OSError) as exc:
             raise ZooError(f"{source}: damaged run config ({exc.__class__.__name__})") from None
         return scenario_from_dict(data, source=str(source))
+
+    def write_config(self, scenario: Scenario) -> None:
+        """Write the resolved scenario as the run's ``config.yaml``."""
+        atomic_write_text(self.path / "config.yaml", yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
 
     def log_command(self) -> None:
         """Append the current command to ``command.txt``."""
@@ -229,7 +236,7 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
     """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
 
     Ratings of different tournaments sit on different scales, so only one tournament is used.
-    Keys are resolved checkpoint paths.
+    Keys are resolved checkpoint paths, and policy strings for players that are not files.
     """
     for results in sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime, reverse=True):
         try:
@@ -241,9 +248,13 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
             continue
         found = {}
         for rating in ratings:
-            spec = Path(rating.get("spec", "")) if isinstance(rating, dict) else Path()
+            if not isinstance(rating, dict) or not rating.get("spec"):
+                continue
+            spec = Path(rating["spec"])
             if spec.suffix == ".zip":
                 path = spec if spec.is_absolute() else results.parent / spec
                 found[str(path.resolve())] = {**rating, "spec": str(path), "results": str(results)}
+            else:  # a built-in or module:Class player, keyed by its policy string
+                found[rating["spec"]] = {**rating, "results": str(results)}
         return found
     return {}

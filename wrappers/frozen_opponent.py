@@ -17,7 +17,9 @@ game step) and sums the rewards, scaled by ``reward_scale``. The observation is 
 The actor reads ``obs`` (and, with a belief, ``history``); a centralised critic also reads
 ``state`` and ``opp_action``. Finished games restart inside ``step``; the last observation of an
 episode is in ``info["terminal_observation"]``, and ``info["episode"]`` holds its unscaled
-return ``r`` and length ``l`` (game steps) as SB3's ``Monitor`` would.
+return ``r`` and length ``l`` (game steps) as SB3's ``Monitor`` would, ``info["captured"]`` the
+outcome, and, when the opponent names who played each game (a :class:`~pecli.policies.mixed.MixedPolicy`'s
+``game_labels``), ``info["opponent"]`` that name.
 """
 
 from __future__ import annotations
@@ -78,6 +80,12 @@ class FrozenOpponentCore:
         self.game.fov["pursuer"] = pursuer_fov
         self.game.speed_scale["evader"] = evader_speed_scale
 
+    def set_opponent(self, opponent: Policy) -> None:
+        """Play against ``opponent`` from the next :meth:`reset` on (self-play swaps pools between rounds)."""
+        if opponent.role != self.opponent_role:
+            raise ValueError(f"the opponent of a {self.role} must play {self.opponent_role}, not {opponent.role}")
+        self.opponent = opponent
+
     def reset(self, seed: int | None = None) -> dict[str, np.ndarray]:
         """Start every game; a ``seed`` restarts the start-state sequence."""
         obs = self.game.reset(seed=seed)
@@ -131,12 +139,15 @@ class FrozenOpponentCore:
             ended = np.flatnonzero(done)
             self._opponent_action[ended] = 0.0  # no action follows the end of a game
             terminal = self._observation(ended)
+            labels = getattr(self.opponent, "game_labels", None)
             for j, i in enumerate(ended):
                 infos[i].update(
                     terminal_observation={key: value[j].copy() for key, value in terminal.items()},
                     episode={"r": float(self._return[i]), "l": int(self.game.t[i])},
                     captured=bool(captured[i]),
                 )
+                if labels is not None:
+                    infos[i]["opponent"] = labels[i]
             self._return[ended] = 0.0
             fresh = self.game.reset(mask=done)
             self.opponent.reset(self.n, mask=done)

@@ -96,7 +96,7 @@ def best(
 
     if role not in ("pursuer", "evader"):
         raise PecliError(f"role must be pursuer or evader, not '{role}'")
-    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and Path(path).is_file()]
+    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and path.endswith(".zip") and Path(path).is_file()]
     if not rated:
         raise PecliError(f"no rated {role} checkpoint in {zoo}: run `pecli tournament {zoo}` first")
     top = max(rated, key=lambda r: r["elo"])

@@ -1,4 +1,4 @@
-"""SB3 callbacks of a training run: curriculum, episode statistics and progress, zoo checkpoints, evaluation."""
+"""SB3 callbacks of a training run: curriculum, episode statistics and progress, evaluation, self-play's pool records and live view."""
 
 from __future__ import annotations
 
@@ -8,9 +8,13 @@ import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from rich.console import Group
+from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.table import Table
 from stable_baselines3.common.callbacks import BaseCallback
 
 from pecli.scenario import Scenario
@@ -158,3 +162,105 @@ class Evaluation(BaseCallback):
                 [self.num_timesteps, f"{time.process_time():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
             )
         return rate
+
+
+class PoolTracker(BaseCallback):
+    """Self-play: credits every finished episode to the opponent that played it and, under PFSP,
+    re-weights the draws of the games that start next.
+
+    Args:
+        pool: the opponents' pool (records are updated in place).
+        opponent: the learner's opponent, a ``MixedPolicy`` over ``pool``'s entries (same order).
+        weigh: ``pool -> weights`` when draws follow the records (PFSP), else ``None``.
+    """
+
+    def __init__(self, pool: Any, opponent: Any, weigh: Callable[[Any], np.ndarray] | None = None) -> None:
+        super().__init__()
+        self.pool, self.opponent, self.weigh = pool, opponent, weigh
+        self.episodes = 0
+        self.captures = 0
+        self.per_opponent: dict[str, list[int]] = {name: [0, 0] for name in opponent.names}  # [episodes, wins]
+
+    @property
+    def capture_rate(self) -> float:
+        return self.captures / self.episodes if self.episodes else float("nan")
+
+    def _on_step(self) -> bool:
+        finished = [info for info in self.locals["infos"] if "opponent" in info]
+        for info in finished:
+            entry_won = info["captured"] if self.pool.role == "pursuer" else not info["captured"]
+            self.pool.observe(info["opponent"], entry_won)
+            record = self.per_opponent[info["opponent"]]
+            record[0] += 1
+            record[1] += int(entry_won)
+            self.episodes += 1
+            self.captures += int(info["captured"])
+        if finished:
+            self.logger.record("selfplay/capture_rate", self.capture_rate)
+            if self.weigh is not None:
+                self.opponent.weights = self.weigh(self.pool)
+        return True
+
+
+class RoundDisplay(BaseCallback):
+    """A rich live view of one side's turn in a self-play round: a progress bar and the opponents
+    with their draw weights, episodes and win rates this round."""
+
+    def __init__(self, tracker: PoolTracker, total_steps: int, title: str, enabled: bool = True) -> None:
+        super().__init__()
+        self.tracker = tracker
+        self.total_steps = total_steps
+        self.title = title
+        self.enabled = enabled
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed:>8,.0f}/{task.total:,.0f} steps"),
+            TextColumn("ep {task.fields[episodes]:>5}  capture {task.fields[capture]}"),
+            TimeRemainingColumn(),
+        )
+        self.task = self.progress.add_task(title, total=total_steps, episodes=0, capture="  -  ")
+        self.live: Live | None = None
+        self._start = 0
+        self._last = 0.0
+
+    def _table(self) -> Table:
+        table = Table(box=None, padding=(0, 2), header_style="dim")
+        for column in ("opponent", "weight", "episodes", "it wins"):
+            table.add_column(column, justify="left" if column == "opponent" else "right")
+        for name, weight in zip(self.tracker.opponent.names, self.tracker.opponent.weights):
+            episodes, wins = self.tracker.per_opponent[name]
+            table.add_row(name, f"{weight:.2f}", str(episodes), f"{wins / episodes:.2f}" if episodes else "-")
+        return table
+
+    def _render(self) -> Group:
+        capture = self.tracker.capture_rate
+        self.progress.update(
+            self.task,
+            completed=self.num_timesteps - self._start,
+            episodes=self.tracker.episodes,
+            capture="  -  " if math.isnan(capture) else f"{capture:5.2f}",
+        )
+        return Group(self.progress, self._table())
+
+    def _on_training_start(self) -> None:
+        self._start = self.num_timesteps
+        if self.enabled:
+            self.live = Live(self._render(), refresh_per_second=4, transient=True)
+            self.live.start()
+
+    def _on_step(self) -> bool:
+        now = time.perf_counter()
+        if self.live is not None and now - self._last >= 0.25:
+            self._last = now
+            self.live.update(self._render())
+        return True
+
+    def _on_training_end(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the live view (also when training stops with an exception)."""
+        if self.live is not None:
+            self.live.stop()
+            self.live = None

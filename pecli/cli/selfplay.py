@@ -1,0 +1,127 @@
+"""``pecli selfplay``: alternating self-play of a pursuer and an evader, each against the other's pool."""
+
+from __future__ import annotations
+
+import enum
+import signal
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from pecli.cli.common import ConfigOption, err_console, user_errors
+from pecli.cli.train import BeliefChoice
+from pecli.errors import PecliError
+from pecli.scenario import load_scenario
+
+
+class OpponentsChoice(str, enum.Enum):
+    latest = "latest"
+    uniform = "uniform"
+    pfsp = "pfsp"
+
+
+@user_errors
+def selfplay(
+    config: ConfigOption = "paper",
+    rounds: Annotated[int | None, typer.Option("--rounds", "-r", help="Rounds (default: the config's). "
+                                               "With --resume: more rounds extend the run.")] = None,
+    steps_per_round: Annotated[
+        int | None, typer.Option("--steps-per-round", help="Learner transitions per side per round (default: the config's).")
+    ] = None,
+    belief: Annotated[
+        BeliefChoice | None, typer.Option("--belief", help="What each actor knows of the unseen opponent (default: the config's).")
+    ] = None,
+    opponents: Annotated[
+        OpponentsChoice | None,
+        typer.Option("--opponents", help="How opponents are drawn from the pool: latest, uniform (fictitious self-play) "
+                     "or pfsp (prioritised by how often they win). Default: the config's, pfsp."),
+    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, draws, noise and networks (default 0).")] = None,
+    zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
+    name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-selfplay-seed-time).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its last finished turn.")] = False,
+    overrides: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="Override a training setting, e.g. --set selfplay.pfsp_power=1 --set n_envs=16."),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view (the line per round stays).")] = False,
+) -> None:
+    """Train a pursuer and an evader by alternating self-play.
+
+    Each round trains the pursuer against evaders drawn from the evader pool, then the evader
+    against the pursuer pool; each new checkpoint joins its side's pool. Pools start with the
+    heuristic baselines. Both learners keep their networks and replay buffers from round to round.
+    Checkpoints go to [bold]zoo/<run>/<role>/round-NNN.zip[/] with their lineage; Ctrl-C stops, and
+    [bold]--resume[/] continues from the last finished turn. Settings: the config's
+    [bold]training.selfplay[/] section.
+    """
+    from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
+    from pecli.rl.train import parse_overrides, with_overrides
+    from pecli.zoo import Run
+
+    settings = parse_overrides(overrides or [])
+    for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
+                       ("belief", belief.value if belief else None), ("selfplay.opponents", opponents.value if opponents else None)):
+        if value is not None:
+            settings[key] = value
+    if resume:
+        if name is None:
+            raise PecliError("--resume needs the --name of the run to continue")
+        run = Run.open(zoo, name)
+        scenario = run.scenario()
+        state = read_state(run)
+        if seed is not None and seed != state.seed:
+            raise PecliError(f"run '{name}' plays with --seed {state.seed}; a resumed run keeps it")
+        current = scenario.training.model_dump(mode="json")
+        changed = sorted(key for key, value in settings.items() if key != "selfplay.rounds" and _get(current, key) != value)
+        if changed:
+            raise PecliError(f"only --rounds can change when resuming (not {', '.join(changed)})")
+        seed = state.seed
+    else:
+        scenario = load_scenario(config)
+        seed = 0 if seed is None else seed
+    if settings:
+        scenario = with_overrides(scenario, settings, source="options")
+    sp = scenario.training.selfplay
+    job = SelfPlayJob(
+        scenario=scenario,
+        zoo=zoo,
+        name=name or f"{scenario.name}-selfplay-s{seed}-{_stamp()}",
+        seed=seed,
+        resume=resume,
+        progress=not quiet and err_console.is_terminal,
+    )
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
+        err_console.print(
+            f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} rounds of {sp.steps_per_round:,} steps per side "
+            f"on {scenario.name}, opponents {sp.opponents}, belief {scenario.training.belief}", highlight=False)
+        final = loop.run()
+    except SelfPlayInterrupted as stop:
+        err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); finished turns are saved: "
+                          f"continue with --resume --name {job.name}", highlight=False)
+        raise typer.Exit(code=130) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    for role, path in final.items():
+        err_console.print(f"[green]done[/]: {role} {path}", highlight=False)
+
+
+def _get(data: dict, dotted: str) -> object:
+    for part in dotted.split("."):
+        if not isinstance(data, dict) or part not in data:
+            return None
+        data = data[part]
+    return data
+
+
+def _stamp() -> str:
+    import time
+
+    return time.strftime("%Y%m%d-%H%M%S")

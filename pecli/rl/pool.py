@@ -1,0 +1,112 @@
+"""The opponent pool of self-play: who is in it, how each has fared, and how opponents are drawn.
+
+Three ways to draw (``training.selfplay.opponents``):
+
+``latest``   the newest generation only (the baselines, until a learner has finished a round);
+``uniform``  every entry alike: fictitious self-play;
+``pfsp``     prioritised fictitious self-play: an entry's weight is ``p ** power``, where ``p``
+             estimates how often it beats the current learner, so the learner practises most
+             against what still beats it. ``p`` pools the learner's own episodes against the entry
+             with a prior worth ``prior_episodes`` episodes: the prediction of a tournament's
+             ratings when one rated both, else 0.5.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pecli.roles import Role
+
+STRATEGIES = ("latest", "uniform", "pfsp")
+ELO_PER_LOGIT = 173.7  # pecli.stats.bradley_terry reports 1500 + 173.7 * strength
+MIN_SHARE = 0.02  # (ours) pfsp never starves an entry completely: each gets >= 2 % / entries
+
+
+@dataclass
+class PoolEntry:
+    """One opponent: a policy string (built-in name or checkpoint path) and its record against the learner."""
+
+    name: str
+    spec: str
+    generation: int  # 0 for the baselines, r for the learner's checkpoint after round r
+    episodes: float = 0.0  # episodes the current learner (decayed over rounds) played against it
+    wins: float = 0.0  # of those, how many the entry won
+
+    def win_rate(self, prior: float = 0.5, prior_episodes: float = 10.0) -> float:
+        """Estimated probability that this entry beats the learner."""
+        return (self.wins + prior * prior_episodes) / (self.episodes + prior_episodes)
+
+
+@dataclass
+class OpponentPool:
+    """The pool of one ``role``: entries in the order they joined."""
+
+    role: Role
+    entries: list[PoolEntry] = field(default_factory=list)
+
+    def add(self, name: str, spec: str, generation: int) -> PoolEntry:
+        if any(e.name == name for e in self.entries):
+            raise ValueError(f"the {self.role} pool already holds '{name}'")
+        entry = PoolEntry(name, spec, generation)
+        self.entries.append(entry)
+        return entry
+
+    def entry(self, name: str) -> PoolEntry:
+        for e in self.entries:
+            if e.name == name:
+                return e
+        raise KeyError(name)
+
+    def observe(self, name: str, entry_won: bool) -> None:
+        """Count one finished episode of the learner against ``name``."""
+        e = self.entry(name)
+        e.episodes += 1
+        e.wins += float(entry_won)
+
+    def decay(self, keep: float) -> None:
+        """The learner changed (a new round): keep only ``keep`` of every record."""
+        for e in self.entries:
+            e.episodes *= keep
+            e.wins *= keep
+
+    def weights(
+        self,
+        strategy: str,
+        power: float = 2.0,
+        priors: dict[str, float] | None = None,
+        prior_episodes: float = 10.0,
+    ) -> np.ndarray:
+        """Draw probabilities of the entries under ``strategy``, ``(entries,)``."""
+        if not self.entries:
+            raise ValueError(f"the {self.role} pool is empty")
+        k = len(self.entries)
+        if strategy == "uniform":
+            w = np.ones(k)
+        elif strategy == "latest":
+            newest = max(e.generation for e in self.entries)
+            w = np.array([float(e.generation == newest) for e in self.entries])
+        elif strategy == "pfsp":
+            priors = priors or {}
+            p = np.array([e.win_rate(priors.get(e.name, 0.5), prior_episodes) for e in self.entries])
+            w = p**power
+            w = w / w.sum() if w.sum() > 0 else np.ones(k) / k
+            w = np.maximum(w, MIN_SHARE / k)
+        else:
+            raise ValueError(f"unknown opponent sampling '{strategy}' (known: {', '.join(STRATEGIES)})")
+        return w / w.sum()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"role": self.role, "entries": [asdict(e) for e in self.entries]}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> OpponentPool:
+        return cls(data["role"], [PoolEntry(**e) for e in data["entries"]])
+
+
+def predicted_win_rate(entry_elo: float, learner_elo: float) -> float:
+    """P(entry beats learner) from Bradley–Terry ratings in pecli's Elo points."""
+    return 1.0 / (1.0 + math.exp(-(entry_elo - learner_elo) / ELO_PER_LOGIT))

@@ -1,0 +1,247 @@
+"""Alternating self-play: mixed opponents, pools and their draws, the zoo layout and lineage, resume."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+import torch as th
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.policies.heuristics import Greedy
+from pecli.policies.mixed import MixedPolicy
+from pecli.rl import selfplay as selfplay_module
+from pecli.rl.pool import OpponentPool, predicted_win_rate
+from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
+from pecli.rl.train import with_overrides
+from pecli.scenario import Scenario
+from pecli.zoo import read_metadata
+from wrappers.frozen_opponent import FrozenOpponentVecEnv
+
+runner = CliRunner()
+TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
+        "selfplay.rounds": 2, "selfplay.steps_per_round": 240}
+
+
+def invoke(*args: str):
+    with mock.patch.object(sys, "argv", ["pecli", *args]):
+        return runner.invoke(app, list(args))
+
+
+class Constant:
+    """A pursuer that always plays ``value``."""
+
+    def __init__(self, value: float) -> None:
+        self.role, self.value, self.resets = "pursuer", value, []
+
+    def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
+        self.resets.append(None if mask is None else np.flatnonzero(mask).tolist())
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        return np.full((len(obs), 2), self.value)
+
+
+# -- mixed opponents ---------------------------------------------------------------------------
+def test_each_game_is_played_by_the_member_drawn_for_it() -> None:
+    mixed = MixedPolicy("pursuer", [Constant(-0.5), Constant(0.5)], ["a", "b"])
+    mixed.reset(64, seed=3)
+    actions = mixed.act(np.zeros((64, 11)))
+    expected = np.where(mixed.assignment == 0, -0.5, 0.5)
+    assert np.array_equal(actions[:, 0], expected) and set(mixed.game_labels) == {"a", "b"}
+
+
+def test_draws_follow_the_weights_and_the_seed() -> None:
+    def draws(seed: int) -> np.ndarray:
+        mixed = MixedPolicy("pursuer", [Constant(0), Constant(1), Constant(2)], ["a", "b", "c"], weights=[6, 3, 1])
+        mixed.reset(20_000, seed=seed)
+        return mixed.assignment.copy()
+
+    first = draws(1)
+    assert np.array_equal(first, draws(1)) and not np.array_equal(first, draws(2))
+    assert np.allclose(np.bincount(first) / first.size, [0.6, 0.3, 0.1], atol=0.015)
+
+
+def test_a_restart_redraws_only_the_restarted_games_and_tells_their_new_member() -> None:
+    members = [Constant(0), Constant(1)]
+    mixed = MixedPolicy("pursuer", members, ["a", "b"], weights=[1, 0])
+    mixed.reset(6, seed=0)
+    assert (mixed.assignment == 0).all()
+    mixed.weights = [0, 1]
+    mask = np.array([False, True, False, False, True, False])
+    mixed.reset(6, mask=mask)
+    assert mixed.assignment.tolist() == [0, 1, 0, 0, 1, 0]
+    assert members[1].resets[-1] == [1, 4]
+
+
+def test_mixed_policies_refuse_bad_members_and_weights(quick: Scenario) -> None:
+    with pytest.raises(ValueError, match="must play pursuer"):
+        MixedPolicy("pursuer", [Greedy(quick, "evader")], ["g"])
+    with pytest.raises(ValueError, match="weights"):
+        MixedPolicy("pursuer", [Constant(0)], ["a"], weights=[-1])
+
+
+def test_the_training_view_names_the_opponent_of_each_finished_game(quick: Scenario) -> None:
+    mixed = MixedPolicy("evader", [Greedy(quick, "evader")], ["greedy"])
+    env = FrozenOpponentVecEnv(quick, "pursuer", mixed, n=4, seed=0, history=False)
+    env.reset()
+    seen = []
+    for _ in range(200):
+        _, _, dones, infos = env.step(np.zeros((4, 2)))
+        seen += [info["opponent"] for info in infos if "captured" in info]
+    assert seen and set(seen) == {"greedy"}
+
+
+# -- pools -------------------------------------------------------------------------------------
+def pool() -> OpponentPool:
+    p = OpponentPool("evader")
+    p.add("greedy", "greedy", 0)
+    p.add("rash", "rash", 0)
+    p.add("evader-r001", "evader/round-001.zip", 1)
+    return p
+
+
+def test_latest_uniform_and_unknown_strategies() -> None:
+    p = pool()
+    assert p.weights("latest").tolist() == [0, 0, 1]
+    assert np.allclose(p.weights("uniform"), 1 / 3)
+    baselines = OpponentPool("evader")
+    baselines.add("greedy", "greedy", 0)
+    baselines.add("rash", "rash", 0)
+    assert np.allclose(baselines.weights("latest"), 0.5)  # the baselines are one generation
+    with pytest.raises(ValueError, match="unknown opponent sampling"):
+        p.weights("best")
+
+
+def test_pfsp_favours_the_opponents_that_win() -> None:
+    p = pool()
+    assert np.allclose(p.weights("pfsp"), 1 / 3)  # no records: the prior 0.5 for everyone
+    for _ in range(30):
+        p.observe("greedy", entry_won=False)
+        p.observe("rash", entry_won=True)
+    w = p.weights("pfsp", power=2, prior_episodes=10)
+    assert w[1] > w[2] > w[0] > 0  # rash wins, the new one is unknown, greedy always loses but is not starved
+    assert math.isclose(w.sum(), 1)
+    p.decay(0.5)
+    assert p.entry("rash").episodes == 15 and p.entry("rash").wins == 15
+
+
+def test_pfsp_priors_come_from_ratings() -> None:
+    assert math.isclose(predicted_win_rate(1500, 1500), 0.5)
+    assert predicted_win_rate(1700, 1500) > 0.75
+    w = pool().weights("pfsp", priors={"greedy": 0.9, "rash": 0.1, "evader-r001": 0.5})
+    assert w[0] > w[2] > w[1]
+
+
+def test_pools_round_trip_through_json() -> None:
+    p = pool()
+    p.observe("rash", True)
+    assert OpponentPool.from_dict(json.loads(json.dumps(p.to_dict()))) == p
+
+
+# -- the loop ----------------------------------------------------------------------------------
+def job(quick: Scenario, zoo: Path, name: str, **overrides) -> SelfPlayJob:
+    return SelfPlayJob(with_overrides(quick, {**TINY, **overrides}), zoo, name, seed=1, progress=False)
+
+
+@pytest.fixture(scope="module")
+def finished(quick: Scenario, tmp_path_factory) -> tuple[Path, list[str]]:
+    zoo = tmp_path_factory.mktemp("zoo")
+    lines: list[str] = []
+    SelfPlay(job(quick, zoo, "sp"), report=lines.append).run()
+    return zoo / "sp", lines
+
+
+def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path, list[str]]) -> None:
+    run, lines = finished
+    for role in ("pursuer", "evader"):
+        for r in (1, 2):
+            assert (run / role / f"round-00{r}.zip").is_file()
+        assert (run / role / "replay_buffer.pkl").is_file()
+    assert len(lines) == 2 and lines[0].startswith("round 1/2: pursuer captures")
+    p1, e1, p2 = (read_metadata(run / path) for path in ("pursuer/round-001.zip", "evader/round-001.zip",
+                                                         "pursuer/round-002.zip"))
+    assert (p1.round, p1.parent, p2.round, p2.parent) == (1, "", 2, "pursuer/round-001.zip")
+    assert [o["name"] for o in p1.opponents] == ["greedy", "random-walk", "rash"]  # the baselines
+    assert [o["name"] for o in e1.opponents] == ["pure-pursuit", "random-walk", "pursuer-r001"]  # already the new one
+    assert [o["name"] for o in p2.opponents][-1] == "evader-r001"
+    assert sum(o["episodes"] for o in p1.opponents) == p1.episodes > 0
+    assert p2.steps == 2 * p1.steps == 2 * 240  # one learner for the whole run
+    assert p1.opponent == "selfplay:pfsp"
+    state = read_state(type("R", (), {"path": run, "name": "sp"})())
+    assert [(t.round, t.role) for t in state.turns] == [(1, "pursuer"), (1, "evader"), (2, "pursuer"), (2, "evader")]
+
+
+def parameters(path: Path) -> th.Tensor:
+    from stable_baselines3 import TD3
+
+    return th.cat([p.flatten() for p in TD3.load(path).policy.parameters()])
+
+
+def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
+    quick: Scenario, finished: tuple[Path, list[str]], tmp_path: Path, monkeypatch
+) -> None:
+    original = selfplay_module.PoolTracker
+    started: list[str] = []
+
+    class Interrupting(original):
+        def _on_step(self) -> bool:
+            if self.pool.role == "pursuer" and started.count("evader") == 2 and self.num_timesteps > 300:
+                raise KeyboardInterrupt  # round 2, while the evader trains
+            return super()._on_step()
+
+        def _on_training_start(self) -> None:
+            started.append("evader" if self.pool.role == "pursuer" else "pursuer")
+
+    monkeypatch.setattr(selfplay_module, "PoolTracker", Interrupting)
+    with pytest.raises(SelfPlayInterrupted) as stop:
+        SelfPlay(job(quick, tmp_path, "sp")).run()
+    assert (stop.value.round, stop.value.role) == (2, "evader")
+    assert not (tmp_path / "sp" / "evader" / "round-002.zip").exists()
+    monkeypatch.setattr(selfplay_module, "PoolTracker", original)
+
+    resumed = job(quick, tmp_path, "sp")
+    resumed.resume = True
+    SelfPlay(resumed).run()
+    for role in ("pursuer", "evader"):
+        assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"),
+                        parameters(finished[0] / role / "round-002.zip"))
+
+
+def test_the_curriculum_spans_the_first_rounds(quick: Scenario, tmp_path: Path) -> None:
+    fovs: list[float] = []
+    loop = SelfPlay(job(quick, tmp_path, "sp", **{"curriculum.fraction": 1.0}))
+    loop.report = lambda line: fovs.append(loop.learners["pursuer"].env.core.game.fov["pursuer"])
+    loop.run()
+    final = quick.pursuer.sensor.fov
+    assert math.isclose(fovs[0], 2 * math.pi + (final - 2 * math.pi) * 0.5, rel_tol=0.02)  # halfway after round 1
+    assert math.isclose(fovs[1], final)
+
+
+# -- the command -------------------------------------------------------------------------------
+def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
+    args = ["selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "cli", "--rounds", "1",
+            "--steps-per-round", "120", "--opponents", "uniform", "-q",
+            *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")]]
+    result = invoke(*args)
+    assert result.exit_code == 0, result.output
+    assert "round 1/1" in result.output and (tmp_path / "cli" / "evader" / "round-001.zip").is_file()
+    assert "already exists" in invoke(*args).output
+    common = ["selfplay", "--zoo", str(tmp_path), "--resume", "-q"]
+    result = invoke(*common, "--name", "cli", "--opponents", "pfsp")
+    assert result.exit_code == 1 and "only --rounds can change" in result.output
+    result = invoke(*common, "--name", "nope")
+    assert result.exit_code == 1 and "no run 'nope'" in result.output
+    result = invoke(*common)
+    assert result.exit_code == 1 and "--resume needs the --name" in result.output
+    (tmp_path / "cli" / "selfplay.json").write_text("{")
+    result = invoke(*common, "--name", "cli")
+    assert result.exit_code == 1 and "damaged self-play state" in result.output
+    (tmp_path / "cli" / "selfplay.json").unlink()
+    result = invoke(*common, "--name", "cli")
+    assert result.exit_code == 1 and "not a self-play run" in result.output

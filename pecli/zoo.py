@@ -11,7 +11,8 @@ Layout of one run::
             ep0000250.json   its metadata (see :class:`CheckpointMeta`)
             final.zip/.json  the end of training
             last.zip/.json   where an interrupted run resumes from, with
-            replay_buffer.pkl  its replay buffer
+            replay_buffer.pkl  its replay buffer, and
+            belief_fit.pt    a learned belief's own buffer and optimiser
 
 Every file is written atomically.
 """
@@ -38,6 +39,7 @@ from pecli.scenario import Scenario, scenario_from_dict
 FINAL = "final"
 LAST = "last"
 REPLAY_BUFFER = "replay_buffer.pkl"
+BELIEF_STATE = "belief_fit.pt"
 
 
 class ZooError(PecliError):
@@ -190,11 +192,28 @@ class Run:
         atomic_write_json(metadata_path(path), meta.to_dict())
         return path
 
-    def save_replay_buffer(self, model: Any, role: Role) -> Path:
+    def save_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None) -> Path:
+        """Write the model's replay buffer (and, given a ``FitBelief``, the belief's buffer and optimiser)."""
         path = self.role_dir(role) / REPLAY_BUFFER
         with atomic_path(path) as tmp:
             model.save_replay_buffer(tmp)
+        if belief_fit is not None:
+            import torch
+
+            with atomic_path(self.role_dir(role) / BELIEF_STATE) as tmp:
+                torch.save(belief_fit.state_dict(), tmp)
         return path
+
+    def load_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None) -> None:
+        """Load what :meth:`save_replay_buffer` wrote, where it exists."""
+        path = self.role_dir(role) / REPLAY_BUFFER
+        if path.is_file():
+            model.load_replay_buffer(path)
+        state = self.role_dir(role) / BELIEF_STATE
+        if belief_fit is not None and state.is_file():
+            import torch
+
+            belief_fit.load_state_dict(torch.load(state, weights_only=False))
 
 
 @dataclass

@@ -183,9 +183,21 @@ def parameters(path: Path) -> th.Tensor:
     return th.cat([p.flatten() for p in TD3.load(path).policy.parameters()])
 
 
+BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8, "belief_settings.buffer_size": 400,
+         "belief_settings.warmup": 40, "belief_settings.batch_size": 16, "belief_settings.update_every": 2}
+
+
+@pytest.mark.parametrize("belief", ["none", "bimdn"])
 def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
-    quick: Scenario, finished: tuple[Path, list[str]], tmp_path: Path, monkeypatch
+    quick: Scenario, finished: tuple[Path, list[str]], tmp_path: Path, monkeypatch, belief: str
 ) -> None:
+    settings = BIMDN if belief == "bimdn" else {}
+    if belief == "none":
+        reference = finished[0]
+    else:
+        SelfPlay(job(quick, tmp_path / "ref", "sp", **settings)).run()
+        reference = tmp_path / "ref" / "sp"
+        assert (reference / "evader" / "belief_fit.pt").is_file()
     original = selfplay_module.PoolTracker
     started: list[str] = []
 
@@ -200,17 +212,16 @@ def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
 
     monkeypatch.setattr(selfplay_module, "PoolTracker", Interrupting)
     with pytest.raises(SelfPlayInterrupted) as stop:
-        SelfPlay(job(quick, tmp_path, "sp")).run()
+        SelfPlay(job(quick, tmp_path, "sp", **settings)).run()
     assert (stop.value.round, stop.value.role) == (2, "evader")
     assert not (tmp_path / "sp" / "evader" / "round-002.zip").exists()
     monkeypatch.setattr(selfplay_module, "PoolTracker", original)
 
-    resumed = job(quick, tmp_path, "sp")
+    resumed = job(quick, tmp_path, "sp", **settings)
     resumed.resume = True
     SelfPlay(resumed).run()
     for role in ("pursuer", "evader"):
-        assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"),
-                        parameters(finished[0] / role / "round-002.zip"))
+        assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip"))
 
 
 def test_the_curriculum_spans_the_first_rounds(quick: Scenario, tmp_path: Path) -> None:

@@ -47,6 +47,21 @@ class BeliefBuffer:
         index = self.rng.integers(0, self.size, size=batch)
         return th.as_tensor(self.history[index]), th.as_tensor(self.target[index]), self.unseen[index]
 
+    def state_dict(self) -> dict[str, Any]:
+        """The filled part of the buffer, its cursor and its sampling RNG."""
+        return {"history": th.as_tensor(self.history[: self.size]), "target": th.as_tensor(self.target[: self.size]),
+                "unseen": th.as_tensor(self.unseen[: self.size]), "cursor": self.cursor,
+                "capacity": self.capacity, "rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        size = state["history"].shape[0]
+        if state["capacity"] != self.capacity or state["history"].shape[1] != self.history.shape[1]:
+            raise ValueError("the saved belief buffer has another capacity or window size")
+        self.history[:size], self.target[:size] = state["history"].numpy(), state["target"].numpy()
+        self.unseen[:size] = state["unseen"].numpy()
+        self.size, self.cursor = size, int(state["cursor"])
+        self.rng.bit_generator.state = state["rng"]
+
 
 class BeliefVecEnv(VecEnvWrapper):
     """Swaps the view's ``history`` for ``belief`` features and records belief training pairs.
@@ -127,9 +142,18 @@ class FitBelief(BaseCallback):
 
     def _on_step(self) -> bool:
         s = self.settings
-        if self.n_calls % s.update_every == 0 and self.buffer.size >= max(s.warmup, 1):
+        vector_steps = self.num_timesteps // self.training_env.num_envs  # restored on resume, unlike n_calls
+        if vector_steps % s.update_every == 0 and self.buffer.size >= max(s.warmup, 1):
             self.update()
         return True
+
+    def state_dict(self) -> dict[str, Any]:
+        """What a resumed run needs to fit on as if never stopped: the buffer and the optimiser."""
+        return {"buffer": self.buffer.state_dict(), "optimizer": self.optimizer.state_dict()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.buffer.load_state_dict(state["buffer"])
+        self.optimizer.load_state_dict(state["optimizer"])
 
     def update(self) -> float:
         history, target, unseen = self.buffer.sample(self.settings.batch_size)

@@ -13,6 +13,7 @@ A run in the zoo::
         selfplay.json                the state: pools and their records, finished turns, seeds
         pursuer/round-001.zip/.json  the pursuer after round 1, with its lineage in the metadata
         pursuer/replay_buffer.pkl    the pursuer's replay buffer after its last finished turn
+        pursuer/belief_fit.pt        with a learned belief: its own buffer and optimiser
         evader/...
 
 ``selfplay.json`` is written after a turn's checkpoint and buffer, so it always names finished
@@ -45,7 +46,7 @@ from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.zoo import REPLAY_BUFFER, Run, tournament_ratings
+from pecli.zoo import Run, tournament_ratings
 
 STATE_FILE = "selfplay.json"
 
@@ -172,17 +173,18 @@ class Learner:
                                                           tensorboard_log=str(run.path / "tb"))
             except Exception as exc:  # a damaged zip: SB3 raises many kinds
                 raise PecliError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
-            buffer = run.role_dir(role) / REPLAY_BUFFER
-            if buffer.is_file():
-                self.model.load_replay_buffer(buffer)
         self.callbacks: list[Any] = []
         if t.curriculum.enabled:
             self.callbacks.append(CurriculumCallback(job.scenario, state.curriculum_steps, t.curriculum.fraction))
+        self.fit: FitBelief | None = None
         if isinstance(self.env, BeliefVecEnv):
             belief = self.model.policy.actor.features_extractor.belief
             self.env.set_belief(belief)
             if belief.learned and self.env.buffer is not None:
-                self.callbacks.append(FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half))
+                self.fit = FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half)
+                self.callbacks.append(self.fit)
+        if latest is not None:
+            run.load_replay_buffer(self.model, role, self.fit)
 
 
 class SelfPlay:
@@ -303,7 +305,7 @@ class SelfPlay:
             for e in self.state.pools[other].entries
         ]
         path = self.run_dir.save(learner.model, role, checkpoint_name(r), meta)
-        self.run_dir.save_replay_buffer(learner.model, role)
+        self.run_dir.save_replay_buffer(learner.model, role, learner.fit)
         relative = str(path.relative_to(self.run_dir.path))
         self.state.pools[role].add(f"{role}-r{r:03d}", relative, generation=r)
         self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), tracker.episodes, tracker.captures,

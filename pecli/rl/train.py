@@ -30,7 +30,7 @@ from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.policies import CentralCriticPolicy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import FINAL, LAST, REPLAY_BUFFER, CheckpointMeta, Run, read_metadata
+from pecli.zoo import FINAL, LAST, CheckpointMeta, Run, read_metadata
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -219,9 +219,6 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         env = make_env(job, opponent, seed)
         model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
-        buffer = run.role_dir(job.role) / REPLAY_BUFFER
-        if buffer.is_file():
-            model.load_replay_buffer(buffer)
         run.log_command()
         episodes = meta.episodes
     else:
@@ -251,8 +248,12 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         callbacks.insert(0, CurriculumCallback(job.scenario, schedule, t.curriculum.fraction))
+    fit = None
     if belief is not None and belief.learned and env.buffer is not None:
-        callbacks.append(FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half))
+        fit = FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half)
+        callbacks.append(fit)
+    if job.resume:
+        run.load_replay_buffer(model, job.role, fit)
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
         callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv"))
@@ -268,14 +269,14 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
             )
     except KeyboardInterrupt:
         last = run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
-        run.save_replay_buffer(model, job.role)
+        run.save_replay_buffer(model, job.role, fit)
         raise TrainingInterrupted(last) from None
     finally:
         logger = getattr(model, "_logger", None)
         if logger is not None:
             logger.close()
     run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
-    run.save_replay_buffer(model, job.role)
+    run.save_replay_buffer(model, job.role, fit)
     return run.save(model, job.role, FINAL, checkpoint_meta(job, model, stats.episodes))
 
 

@@ -109,7 +109,10 @@ class ExportedModel:
     @classmethod
     def from_bytes(cls, model: bytes, sidecar: dict[str, Any], threads: int = 1, source: str = "model") -> ExportedModel:
         """A model from the graph's bytes (serialised ONNX) and its sidecar."""
-        import onnxruntime as ort
+        try:
+            import onnxruntime as ort
+        except ImportError:
+            raise ExportError("exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')") from None
 
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads

@@ -133,11 +133,12 @@ def test_units_round_trip(scenario: Scenario) -> None:
             opp[:, 2] = 0.0  # the own frame does not observe a car opponent's steering angle
         np.testing.assert_allclose(back[seen[role], layout.k : layout.k + layout.m], opp[seen[role]], atol=1e-4)
     car = SILayout(scenario, "pursuer")
-    if car.own.has_heading:  # headings outside [-pi, pi) are wrapped
-        si = layout_row = car.to_si(obs["pursuer"][:4])
-        turned = layout_row.copy()
+    if car.own.has_heading:  # headings outside [-pi, pi) are wrapped, in NumPy and in the graph
+        si = car.to_si(obs["pursuer"][:4])
+        turned = si.copy()
         turned[:, 4] += 2 * math.pi
         np.testing.assert_allclose(car.from_si(turned), car.from_si(si), atol=1e-6)
+        np.testing.assert_allclose(SIEncoder(car)(th.as_tensor(turned)).numpy(), car.from_si(si), atol=1e-6)
 
 
 def record_game(scenario: Scenario, policy, seed: int, steps: int = 60) -> tuple[list[np.ndarray], list[np.ndarray], list]:

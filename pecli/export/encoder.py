@@ -20,78 +20,71 @@ PI = math.pi
 TWO_PI = 2.0 * math.pi
 
 
-def wrap_heading(angle: th.Tensor) -> th.Tensor:
-    """Angles (rad) wrapped to [-pi, pi); values already in range pass unchanged."""
-    inside = (angle >= -PI) & (angle < PI)
-    return th.where(inside, angle, angle - TWO_PI * th.floor((angle + PI) / TWO_PI))
-
-
-def wrap_near(angle: th.Tensor) -> th.Tensor:
-    """:func:`pecli.game.dynamics.wrap_near` for angles in [-3 pi, 3 pi)."""
-    angle = th.where(angle >= PI, angle - TWO_PI, angle)
-    return th.where(angle < -PI, angle + TWO_PI, angle)
-
-
 def _f64(values) -> th.Tensor:
     return th.tensor(values, dtype=th.float64)
 
 
 class SIEncoder(nn.Module):
-    """SI rows ``(..., dim)`` float64 to normalised observations ``(..., dim)`` float32 (see :mod:`pecli.game.si`)."""
+    """SI rows ``(..., dim)`` float64 to normalised observations ``(..., dim)`` float32 (see :mod:`pecli.game.si`).
+
+    Written with few, whole-row operations (the graph runs at every decision of a robot, and ONNX
+    Runtime's cost at batch 1 is mostly per operator), in the same floating-point steps as the
+    game's codec: SI products in float64, cast to float32, the relative block scaled in float32.
+    """
 
     def __init__(self, layout: SILayout) -> None:
         super().__init__()
         codec = layout.codec
-        self.k, self.m = layout.k, layout.m
+        k, m = self.k, self.m = layout.k, layout.m
         self.own_car, self.opp_car = layout.own.has_heading, layout.opp.has_heading
         self.world = codec.frame == "world"
         half = (codec.half_x, codec.half_y)
-        self.register_buffer("own_inverse_scale", 1.0 / _f64(layout.own.scale(*half)), persistent=False)
-        self.register_buffer("opp_inverse_scale", 1.0 / _f64(layout.opp.scale(*half)), persistent=False)
-        # the codec scales the relative block in float32
-        self.register_buffer("inverse_range", th.tensor(1.0 / codec.sensing_range, dtype=th.float32), persistent=False)
-        self.register_buffer("inverse_velocity", th.tensor(1.0 / codec.velocity_scale, dtype=th.float32), persistent=False)
-        self.inverse_horizon = 1.0 / layout.horizon_s
+        scale = [*layout.own.scale(*half), *layout.opp.scale(*half), 1.0, layout.horizon_s]
+        # headings (a car's psi) wrap to [-pi, pi): x - 2 pi floor((x + pi) / 2 pi), a no-op in range
+        angle = [0.0] * layout.dim
+        for offset, car in ((0, self.own_car), (k, self.opp_car)):
+            if car:
+                angle[offset + 4] = -TWO_PI
+        self.register_buffer("angle", _f64(angle), persistent=False)
+        self.register_buffer("inverse_scale", 1.0 / _f64(scale), persistent=False)
+        # the codec scales the relative block in float32: positions by the range, velocities by the speed sum
+        relative = [1.0 / codec.sensing_range] * 2 + [1.0 / codec.velocity_scale] * 2
+        self.register_buffer("relative_scale", th.tensor(relative, dtype=th.float32), persistent=False)
+        self.register_buffer("swap", th.tensor([1, 0, 3, 2]), persistent=False)
+        self.register_buffer("swap_sign", _f64([1.0, -1.0, 1.0, -1.0]), persistent=False)
 
     def forward(self, si: th.Tensor) -> th.Tensor:
         k, m = self.k, self.m
-        own, opp = si[..., :k], si[..., k : k + m]
-        flag, time = si[..., k + m], si[..., k + m + 1]
-        if self.own_car:
-            own = th.cat([own[..., :4], wrap_heading(own[..., 4:5])], dim=-1)
-        if self.opp_car:
-            opp = th.cat([opp[..., :4], wrap_heading(opp[..., 4:5])], dim=-1)
-        own_n = (own * self.own_inverse_scale).float()
-        block = (opp * self.opp_inverse_scale).float() if self.world else self._relative(own, opp)
-        block = th.where((flag > 0).unsqueeze(-1), block, th.zeros_like(block))
-        time_n = (time * self.inverse_horizon).float()
-        out = th.cat([own_n, block, th.sign(flag).float().unsqueeze(-1), time_n.unsqueeze(-1)], dim=-1)
-        out = th.clamp(out, -1.0, 1.0)
-        return th.where((flag != 0).unsqueeze(-1), out, th.zeros_like(out))
+        si = si + self.angle * th.floor((si + PI) / TWO_PI)
+        normalised = (si * self.inverse_scale).float()  # own state, world-frame opponent, flag, t/T
+        flag = si[..., k + m : k + m + 1]
+        block = normalised[..., k : k + m] if self.world else self._relative(si)
+        block = th.where(flag > 0, block, th.zeros_like(block))
+        out = th.cat([normalised[..., :k], block, th.sign(flag).float(), normalised[..., k + m + 1 :]], dim=-1)
+        return th.clamp(out, -1.0, 1.0)
 
-    def _velocity(self, state: th.Tensor, car: bool) -> tuple[th.Tensor, th.Tensor]:
+    def _velocity(self, state: th.Tensor, car: bool) -> th.Tensor:
+        """World-frame velocity ``(..., 2)`` of an SI state block, m/s."""
         if car:
-            return state[..., 3] * th.cos(state[..., 4]), state[..., 3] * th.sin(state[..., 4])
-        return state[..., 2], state[..., 3]
+            heading = state[..., 4:5]
+            return state[..., 3:4] * th.cat([th.cos(heading), th.sin(heading)], dim=-1)
+        return state[..., 2:4]
 
-    def _relative(self, own: th.Tensor, opp: th.Tensor) -> th.Tensor:
-        """The own-frame opponent block, as ``ObservationCodec._relative`` computes it."""
-        own_vx, own_vy = self._velocity(own, self.own_car)
-        opp_vx, opp_vy = self._velocity(opp, self.opp_car)
-        dx, dy = opp[..., 0] - own[..., 0], opp[..., 1] - own[..., 1]
-        dvx, dvy = opp_vx - own_vx, opp_vy - own_vy
-        if self.own_car:
-            c, s = th.cos(own[..., 4]), th.sin(own[..., 4])
-            rows = [c * dx + s * dy, c * dy - s * dx, c * dvx + s * dvy, c * dvy - s * dvx]
-        else:
-            rows = [dx, dy, dvx, dvy]
-        rows = [row.float() for row in rows]
-        rows = [rows[0] * self.inverse_range, rows[1] * self.inverse_range,
-                rows[2] * self.inverse_velocity, rows[3] * self.inverse_velocity]
+    def _relative(self, si: th.Tensor) -> th.Tensor:
+        """The own-frame opponent block, in ``ObservationCodec._relative``'s arithmetic."""
+        k, m = self.k, self.m
+        own, opp = si[..., :k], si[..., k : k + m]
+        delta = th.cat([opp[..., 0:2] - own[..., 0:2], self._velocity(opp, self.opp_car) - self._velocity(own, self.own_car)],
+                       dim=-1)  # (dx, dy, dvx, dvy)
+        if self.own_car:  # rotate both pairs into the body frame: (c x + s y, c y - s x)
+            c, s = th.cos(own[..., 4:5]), th.sin(own[..., 4:5])
+            delta = c * delta + s * (delta[..., self.swap] * self.swap_sign)
+        block = delta.float() * self.relative_scale
         if self.opp_car:
-            relative = opp[..., 4] if not self.own_car else wrap_near(opp[..., 4] - own[..., 4])
-            rows.append((relative * (1.0 / PI)).float())
-        return th.clamp(th.stack(rows, dim=-1), -1.0, 1.0)
+            relative = opp[..., 4:5] if not self.own_car else opp[..., 4:5] - own[..., 4:5]
+            relative = relative - TWO_PI * th.floor((relative + PI) / TWO_PI)  # wrap_near for headings in range
+            block = th.cat([block, (relative * (1.0 / PI)).float()], dim=-1)
+        return th.clamp(block, -1.0, 1.0)
 
 
 class WindowGeometry(nn.Module):

@@ -61,7 +61,10 @@ def example_inputs(graph: PolicyGraph, layout: SILayout, learned: LearnedPolicy,
 
 def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[PolicyGraph, bytes]:
     """The checkpoint's graph traced to ONNX, validated by ``onnx.checker`` and labelled."""
-    import onnx
+    try:
+        import onnx
+    except ImportError:
+        raise ExportError("pecli export needs onnx and onnxruntime: pip install 'pecli[export]'") from None
 
     graph = PolicyGraph(learned.actor, layout)
     try:

@@ -81,10 +81,14 @@ class PolicyGraph(nn.Module):
         uniform: th.Tensor | None = None,
         normal: th.Tensor | None = None,
     ) -> tuple[th.Tensor, ...]:
-        features = self.encoder(obs).flatten(1)  # (B, frame_stack * dim), as the actor's "obs" entry
         beliefs: tuple[th.Tensor, ...] = ()
-        if self.belief is not None:
-            mixture = Mixture(*self.belief(self.encoder(history)))
+        if self.belief is None:
+            features = self.encoder(obs).flatten(1)  # (B, frame_stack * dim), as the actor's "obs" entry
+        else:  # one pass of the encoder over both
+            stack = obs.shape[1]
+            rows = self.encoder(th.cat([obs, history], dim=1))
+            features, window = rows[:, :stack].flatten(1), rows[:, stack:]
+            mixture = Mixture(*self.belief(window))
             if self.mixed:
                 drawn = mixture.sample_with(uniform, normal).flatten(1)
             else:

@@ -8,12 +8,13 @@ observation of :mod:`pecli.game.observation`)::
 A car's state is ``(s_x m, s_y m, delta rad, v m/s, psi rad)``, a point mass's
 ``(s_x m, s_y m, v_x m/s, v_y m/s)``. ``seen`` is +1 when the opponent is seen and -1 when not
 (the opponent block is then ignored); ``time`` is the time since the episode started, in seconds.
-An all-zero row (``seen`` 0) stands for "no observation yet": the history window's padding.
+An all-zero row (``seen`` 0) stands for "no observation yet": the history window's padding;
+it normalises to zeros, as the window pads.
 
 :meth:`SILayout.to_si` turns the game's normalised observations into SI rows and
 :meth:`SILayout.from_si` is its inverse, the normalisation an exported graph performs inside:
 headings are wrapped to [-pi, pi), every normalised value is clipped to [-1, 1] (the training
-range; a no-op for the game's own observations), and padding rows stay zero.
+range; a no-op for the game's own observations).
 """
 
 from __future__ import annotations
@@ -118,6 +119,4 @@ class SILayout:
             dtype=np.float32,
         )
         obs[:, self.seen_index] = np.sign(flag)
-        np.clip(obs, -1.0, 1.0, out=obs)
-        obs[flag == 0] = 0.0
-        return obs
+        return np.clip(obs, -1.0, 1.0, out=obs)

@@ -96,10 +96,10 @@ class ExportedPolicy(WindowedPolicy):
         """The belief given the window of the last :meth:`act` for the first ``games`` games:
         ``(weights (g, K), means (g, K, 2), stds (g, K, 2))``, normalised world coordinates (as
         :meth:`LearnedPolicy.current_belief`); ``None`` without a belief. Draws no random numbers."""
-        windows = self.windows(games)
-        if windows is None:
+        memory = self.memory(games)
+        if memory is None or memory[1] is None:
             return None
-        obs, window = self._inputs(*windows)
+        obs, window = self._inputs(*memory)
         rows = obs.shape[0]
         zeros = (np.zeros((rows, self.draws), np.float32), np.zeros((rows, self.draws, 2), np.float32))
         outputs = self.model.run(obs, window, *zeros)

@@ -83,11 +83,11 @@ class LearnedPolicy(WindowedPolicy):
         """The belief given the window of the last :meth:`act`, for drawing, for the first ``games`` games:
         ``(weights (g, K), means (g, K, 2), stds (g, K, 2))`` in normalised world coordinates;
         ``None`` for a policy without a belief."""
-        windows = self.windows(games)
-        if self._belief is None or windows is None:
+        memory = self.memory(games)
+        if self._belief is None or memory is None or memory[1] is None:
             return None
         with th.no_grad():
-            mixture = self._belief.mixture(th.as_tensor(windows[1]))
+            mixture = self._belief.mixture(th.as_tensor(memory[1]))
         return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
 
     def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:

@@ -102,12 +102,12 @@ class WindowedPolicy(ABC):
         normal = self.rng.standard_normal((rows, self.draws, 2), dtype=np.float32)
         return uniform, normal
 
-    def windows(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-        """The current frame stacks ``(g, k * dim)`` and history windows ``(g, samples * dim)`` of the first
-        ``games`` games, as of the last :meth:`act`; ``None`` before it or without a belief."""
-        if self._stack is None or self._history is None:
+    def memory(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The frame stacks ``(g, k * dim)`` and history windows ``(g, samples * dim)`` (``None`` without a
+        belief) of the first ``games`` games as of the last :meth:`act`; ``None`` before it."""
+        if self._stack is None:
             return None
-        return self._stack.get()[:games], self._history.get()[:games]
+        return self._stack.get()[:games], None if self._history is None else self._history.get()[:games]
 
     @abstractmethod
     def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:

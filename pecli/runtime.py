@@ -88,10 +88,14 @@ class ExportedModel:
             raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
         self.window = -(-self.history_length // self.history_stride)
         self.has_history = self.belief != "none"
-        names = {node.name for node in session.get_inputs()}
-        expected = {"obs"} | ({"history"} if self.has_history else set()) | ({"uniform", "normal"} if self.draws else set())
-        if names != expected:
-            raise ExportError(f"the graph's inputs {sorted(names)} do not match its sidecar's {sorted(expected)}")
+        expected = {"obs": [self.frame_stack, self.dim]}
+        if self.has_history:
+            expected["history"] = [self.window, self.dim]
+        if self.draws:
+            expected.update(uniform=[self.draws], normal=[self.draws, 2])
+        found = {node.name: list(node.shape[1:]) for node in session.get_inputs()}
+        if found != expected:
+            raise ExportError(f"the graph's inputs {found} do not match its sidecar's {expected} (shapes after the batch)")
         self.outputs = [node.name for node in session.get_outputs()]
 
     @classmethod

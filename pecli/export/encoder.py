@@ -59,7 +59,7 @@ class SIEncoder(nn.Module):
         normalised = (si * self.inverse_scale).float()  # own state, world-frame opponent, flag, t/T
         flag = si[..., k + m : k + m + 1]
         block = normalised[..., k : k + m] if self.world else self._relative(si)
-        block = th.where(flag > 0, block, th.zeros_like(block))
+        block = th.where(flag > 0, block, 0.0)
         out = th.cat([normalised[..., :k], block, th.sign(flag).float(), normalised[..., k + m + 1 :]], dim=-1)
         return th.clamp(out, -1.0, 1.0)
 

@@ -181,8 +181,10 @@ class Controller:
 
     def __init__(self, model: ExportedModel, seed: int | None = None) -> None:
         self.model = model
-        self.seed = seed
-        self.reset(seed)
+        self.rng = np.random.default_rng(seed)
+        # positions back from the newest row, oldest first: (window - 1) * stride, ..., stride, 0
+        self._back = np.arange(model.window - 1, -1, -1) * model.history_stride
+        self.reset()
 
     @classmethod
     def load(cls, path: str | Path, seed: int | None = None, threads: int = 1) -> Controller:
@@ -192,13 +194,12 @@ class Controller:
     def reset(self, seed: int | None = None) -> None:
         """Start a new game: forget the past, restart the clock (and the draws, given a seed)."""
         m = self.model
-        if seed is not None or not hasattr(self, "rng"):
+        if seed is not None:
             self.rng = np.random.default_rng(seed)
         self.ticks = 0
         self.stack = np.zeros((m.frame_stack, m.dim))
         self.buffer = np.zeros((m.history_length, m.dim))  # a ring of the last history_length rows
         self.cursor = 0
-        self._back = np.arange(m.window - 1, -1, -1) * m.history_stride
         self.command = np.zeros(2)
         self.outputs: dict[str, np.ndarray] = {}
 
@@ -235,13 +236,10 @@ class Controller:
         """
         m = self.model
         row = self.row(own, opponent, seen, time)
-        fresh = self.ticks == 0
-        self.buffer[self.cursor] = row
+        self.buffer[self.cursor] = row  # the window holds zeros before a game's first row (reset)
         self.cursor = (self.cursor + 1) % m.history_length
-        if fresh:  # the first tick of a game: the stack is this row, the window only this row
+        if self.ticks == 0:  # a game's first tick fills the frame stack with its row
             self.stack[:] = row
-            self.buffer[:] = 0.0
-            self.buffer[(self.cursor - 1) % m.history_length] = row
         if self.ticks % m.frame_skip == 0:
             self.stack = np.concatenate([self.stack[1:], row[None]])
             self.outputs = self._run()

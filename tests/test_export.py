@@ -30,7 +30,7 @@ from pecli.roles import Role, opponent_of
 from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.runtime import Controller, ExportedModel, sidecar_path
 from pecli.scenario import Scenario
-from pecli.tournament import find_players, play_pairing
+from pecli.tournament import find_players, run_tournament, schedule
 from pecli.zoo import Run
 
 from conftest import all_scenarios
@@ -179,6 +179,30 @@ def test_runtime_plays_a_recorded_game_as_the_checkpoint_and_the_export(exports,
     assert controller.ticks == 0 and not controller.window().any()
 
 
+def test_runtime_memory_matches_the_simulations_over_long_games(exports, quick: Scenario) -> None:
+    """Past the window's 200 ticks (the ring wraps) and across a restart, the runtime's window and frame
+    stack give the commands that the batched policy's (pecli.game.memory) give."""
+    _, model = exports["bimdn"]
+    layout = SILayout(quick, "pursuer")
+    controller = Controller.load(model)
+    policy = resolve_policy(str(model), "pursuer", quick)
+    policy.reset(1)
+    rng = np.random.default_rng(7)
+    half = np.array(quick.arena.half)
+    for tick in range(450):
+        if tick == 300:
+            controller.reset()
+            policy.reset(1, mask=np.array([True]))
+        t = tick if tick < 300 else tick - 300
+        own = np.array([*rng.uniform(-half, half), rng.uniform(-0.3, 0.3), rng.uniform(-1, 2.5), rng.uniform(-3, 3)])
+        opp = np.array([*rng.uniform(-half, half), *rng.uniform(-1.5, 1.5, 2)])
+        seen = bool(rng.random() < 0.5)
+        command = controller.step(own, opp, seen=seen, time=t * quick.dt)
+        row = np.concatenate([own, opp if seen else np.zeros(4), [1.0 if seen else -1.0, t * quick.dt]])
+        policy.act(layout.from_si(row[None]))
+        np.testing.assert_allclose(command, policy.command[0], rtol=0, atol=1e-5, err_msg=f"tick {tick}")
+
+
 def test_runtime_needs_neither_torch_nor_the_simulator(exports, tmp_path: Path) -> None:
     _, model = exports["bimdn"]
     blocked = ["torch", "stable_baselines3", "sb3_contrib", "gymnasium", "pettingzoo", "pydantic", "yaml", "scipy",
@@ -203,18 +227,24 @@ def test_runtime_needs_neither_torch_nor_the_simulator(exports, tmp_path: Path) 
     assert result.stdout.strip() == "ok []"
 
 
-def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(exports, quick: Scenario) -> None:
-    checkpoint, model = exports["evader"]
-    found = find_players([str(checkpoint), str(model)], quick, baselines=True)
-    names = [p.name for p in found.players["evader"]]
-    assert "none-evader/evader/final" in names and "none-evader/evader/final.onnx" in names
-    pursuer = found.players["pursuer"][0]
-    ours, theirs = (next(p for p in found.players["evader"] if p.name == n) for n in names[-2:])
-    a = play_pairing(quick, pursuer, ours, episodes=6, seeds=[0, 1])
-    b = play_pairing(quick, pursuer, theirs, episodes=6, seeds=[0, 1])
-    assert 0 < a.captures  # pure pursuit catches the untrained evader, at times its moves decide
-    assert (a.captures, a.time_to_capture_mean, a.time_to_capture_std) == (b.captures, b.time_to_capture_mean,
-                                                                            b.time_to_capture_std)
+def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(exports, quick: Scenario,
+                                                                          tmp_path: Path) -> None:
+    """An evader without a belief and a pursuer with a mixed belief (its draws seeded by the match), each
+    entered twice: as the checkpoint and as its export."""
+    paths = [str(path) for key in ("evader", "bimdn-mixed") for path in exports[key]]
+    found = find_players(paths, quick, baselines=True)
+    results = run_tournament(quick, found.players, schedule(found.players), episodes=6, seeds=[0, 1], out=tmp_path)
+    grid = {pair: (r.captures, r.time_to_capture_mean, r.time_to_capture_std) for pair, r in results.grid().items()}
+    for role, name in (("evader", "none-evader/evader/final"), ("pursuer", "bimdn-mixed-pursuer/pursuer/final")):
+        others = [p.name for p in found.players[opponent_of(role)]]
+        for other in others:
+            pair, twin = ((other, name), (other, name + ".onnx")) if role == "evader" else ((name, other), (name + ".onnx", other))
+            assert grid[pair] == grid[twin], (pair, grid[pair], grid[twin])
+        outcomes = [grid[(other, name) if role == "evader" else (name, other)][0] for other in others]
+        assert 0 < sum(outcomes) < 12 * len(others)  # captures and escapes: the players' moves decide
+    ratings = {r.name: (r.elo, r.stderr) for r in results.ratings}
+    for name in ("none-evader/evader/final", "bimdn-mixed-pursuer/pursuer/final"):
+        assert ratings[name] == pytest.approx(ratings[name + ".onnx"], rel=1e-9)  # the same games, one fit
 
 
 def test_export_cli_writes_the_model_and_checks_it(exports, tmp_path: Path) -> None:

@@ -21,7 +21,12 @@ from pecli.belief.mixture import Mixture
 from pecli.cli import app
 from pecli.errors import ExportError, PolicyError
 from pecli.export import check_export, export_checkpoint
-from pecli.export.encoder import SIEncoder
+from pecli.belief.image import GRID, rasterise
+from pecli.belief.ukf import WindowUKF
+from pecli.belief.window import WindowDecoder
+from pecli.export.beliefs import KalmanWindow, RasterImage
+from pecli.export.encoder import SIEncoder, WindowGeometry
+from pecli.game.memory import HistoryWindow
 from pecli.game import Game
 from pecli.game.si import SILayout
 from pecli.policies import resolve_policy
@@ -103,6 +108,28 @@ def test_mixed_draws_follow_the_inverse_cdf() -> None:
     uniform = th.tensor([[0.0, 0.19, 0.2, 0.69, 0.71, 0.999]])
     draws = mixture.sample_with(uniform, th.ones((1, 6, 2)))
     np.testing.assert_allclose(draws[0, :, 0].numpy(), [0.5, 0.5, 1.5, 1.5, 2.5, 2.5], atol=1e-6)
+
+
+@pytest.mark.parametrize("scenario", all_scenarios()[:4], ids=lambda s: f"{s.name}-{s.observation_frame}")
+def test_the_graphs_ukf_and_rasteriser_match_numpys(scenario: Scenario) -> None:
+    """The torch twins of the NumPy beliefs, for a car and a point mass, in both frames, on windows with padding."""
+    game = Game(scenario, n=32, seed=2)
+    rng = np.random.default_rng(2)
+    for role in ("pursuer", "evader"):
+        window = HistoryWindow(32, game.obs_dim[role], 200, 10)
+        window.reset(game.reset(seed=2)[role])
+        for _ in range(120):  # 12 of 20 samples: the oldest are padding
+            window.push(game.step(rng.uniform(-1, 1, (32, 2)), rng.uniform(-1, 1, (32, 2))).obs[role])
+        history = window.get().copy()
+        decoder = WindowDecoder(scenario, role)
+        geometry = WindowGeometry(SILayout(scenario, role))
+        rows = th.as_tensor(history.reshape(32, 20, -1))
+        expected = WindowUKF(decoder)(history)
+        _, means, stds = KalmanWindow(geometry, decoder.dt)(rows)
+        np.testing.assert_allclose(means.numpy(), expected.means.numpy(), rtol=0, atol=1e-6)
+        np.testing.assert_allclose(stds.numpy(), expected.stds.numpy(), rtol=0, atol=1e-6)
+        image = RasterImage(geometry, decoder, GRID)(rows).numpy()
+        np.testing.assert_array_equal(image, rasterise(decoder(history), decoder))
 
 
 @pytest.mark.parametrize("scenario", all_scenarios(), ids=lambda s: f"{s.name}-{s.observation_frame}")

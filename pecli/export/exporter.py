@@ -48,7 +48,7 @@ def checkpoint_scenario(checkpoint: Path) -> Scenario:
     return Run(run).scenario()
 
 
-def example_inputs(graph: PolicyGraph, layout: SILayout, learned: LearnedPolicy, batch: int = 2) -> dict[str, th.Tensor]:
+def example_inputs(layout: SILayout, learned: LearnedPolicy, batch: int = 2) -> dict[str, th.Tensor]:
     """Inputs to trace the graph with (values do not matter: the graph has no data-dependent branches)."""
     window = -(-learned.history_length // learned.history_stride) if learned.history_length else 0
     return {
@@ -68,7 +68,7 @@ def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[Po
 
     graph = PolicyGraph(learned.actor, layout)
     try:
-        data = to_onnx(graph, example_inputs(graph, layout, learned), opset)
+        data = to_onnx(graph, example_inputs(layout, learned), opset)
     except Exception as exc:  # an opset the exporter does not support, an operator it cannot write
         raise ExportError(f"cannot export to ONNX opset {opset}: {type(exc).__name__}: {exc}") from None
     model = onnx.load_from_string(data)

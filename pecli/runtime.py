@@ -76,6 +76,8 @@ class ExportedModel:
             control, layout = sidecar["control"], sidecar["layout"]
             self.role: str = sidecar["role"]
             self.belief: str = sidecar["belief"]
+            self.scenario_name: str = sidecar["scenario"]["name"]
+            self.scenario_fingerprint: str = sidecar["scenario"]["fingerprint"]
             self.dt = float(control["dt_s"])
             self.frame_skip, self.frame_stack = int(control["frame_skip"]), int(control["frame_stack"])
             self.history_length, self.history_stride = int(control["history_length"]), int(control["history_stride"])

@@ -104,19 +104,20 @@ def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Play
 
     try:
         sidecar = read_sidecar(path)
+        role, exported_for = sidecar["role"], sidecar["scenario"]
+        run, fingerprint, model_hash = sidecar["checkpoint"].get("run"), exported_for["fingerprint"], sidecar["model_sha256"]
     except PecliError as exc:
         skipped.append(str(exc))
         return None
+    except (KeyError, TypeError, AttributeError):
+        skipped.append(f"{path}: incomplete sidecar")
+        return None
     identity = _file_hash(path)
-    if not str(sidecar.get("model_sha256", "")).startswith(identity):
+    if not str(model_hash).startswith(identity):
         skipped.append(f"{path}: does not match its sidecar (damaged or changed model)")
         return None
-    if sidecar.get("scenario", {}).get("fingerprint") != scenario.fingerprint():
-        skipped.append(f"{path}: exported for scenario '{sidecar.get('scenario', {}).get('name')}', not '{scenario.name}'")
-        return None
-    run, role = sidecar.get("checkpoint", {}).get("run"), sidecar.get("role")
-    if role not in ROLES:
-        skipped.append(f"{path}: its sidecar names no role")
+    if fingerprint != scenario.fingerprint() or role not in ROLES:
+        skipped.append(f"{path}: exported for scenario '{exported_for.get('name')}', not '{scenario.name}'")
         return None
     name = f"{run}/{role}/{path.stem}.onnx" if run else path.name
     return Player(name=name, spec=str(path.resolve()), role=role, identity=identity)

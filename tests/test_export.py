@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from pecli.belief import BELIEF_KINDS
 from pecli.belief.mixture import Mixture
 from pecli.cli import app
-from pecli.errors import ExportError, PolicyError
+from pecli.errors import ExportError, PecliError, PolicyError
 from pecli.export import check_export, export_checkpoint
 from pecli.belief.image import GRID, rasterise
 from pecli.belief.ukf import WindowUKF
@@ -322,6 +322,10 @@ def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, 
             resolve_policy(str(copy), "pursuer", quick)
         result = runner.invoke(app, ["play", "-p", str(copy), "-c", "quick"])
         assert result.exit_code == 1 and as_policy in result.output and "Traceback" not in result.output
+    fresh()
+    copy.write_bytes(model.read_bytes()[:-100])
+    with pytest.raises(PecliError, match="does not match its sidecar"):  # named in a tournament
+        find_players([str(copy)], quick)
     with pytest.raises(PolicyError, match="exported pursuer; it cannot play evader"):
         resolve_policy(str(model), "evader", quick)
     with pytest.raises(PolicyError, match="exported for scenario 'quick'"):

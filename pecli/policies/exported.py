@@ -64,10 +64,9 @@ class ExportedPolicy(WindowedPolicy):
             raise PolicyError(str(exc)) from None
         if model.role != role:
             raise PolicyError(f"{path} is an exported {model.role}; it cannot play {role}")
-        scenario_info = model.sidecar.get("scenario", {})
-        if scenario_info.get("fingerprint") != scenario.fingerprint():
+        if model.scenario_fingerprint != scenario.fingerprint():
             raise PolicyError(
-                f"{path} was exported for scenario '{scenario_info.get('name')}' ({scenario_info.get('fingerprint')}), "
+                f"{path} was exported for scenario '{model.scenario_name}' ({model.scenario_fingerprint}), "
                 f"not for '{scenario.name}' ({scenario.fingerprint()}): pass the config it was trained with"
             )
         return cls(model, scenario, seed=seed)

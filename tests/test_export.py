@@ -288,6 +288,18 @@ def test_export_cli_writes_the_model_and_checks_it(exports, tmp_path: Path) -> N
     assert result.exit_code == 0 and json.loads(result.stdout)["episodes"] == 4
 
 
+def test_an_export_that_fails_parity_is_not_written(exports, tmp_path: Path, monkeypatch) -> None:
+    checkpoint, model = exports["none"]
+    original = ExportedPolicy._decide
+    monkeypatch.setattr(ExportedPolicy, "_decide", lambda self, *args: original(self, *args) + 1e-4)
+    out = tmp_path / "off.onnx"
+    result = runner.invoke(app, ["export", "onnx", str(checkpoint), "--out", str(out), "-n", "1"])
+    assert result.exit_code == 1 and "parity check failed" in result.output and "nothing written" in result.output
+    assert not list(tmp_path.iterdir())
+    result = runner.invoke(app, ["export", "check", str(model), str(checkpoint), "-n", "1"])
+    assert result.exit_code == 1 and "FAILED" in result.output and "parity check failed" in result.output
+
+
 def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, quick: Scenario, paper: Scenario) -> None:
     checkpoint, model = exports["none"]
     copy = tmp_path / "m.onnx"

@@ -11,3 +11,7 @@ class ConfigError(PecliError):
 
 class PolicyError(PecliError):
     """A policy string that does not resolve, or resolves to the wrong role."""
+
+
+class ExportError(PecliError):
+    """An exported model or its sidecar that is missing, damaged, or does not fit; or an export that fails its check."""

@@ -98,6 +98,38 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
     return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=_file_hash(path))
 
 
+def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
+    """An exported model (``.onnx`` with its sidecar) as a player, named after its checkpoint plus ``.onnx``."""
+    from pecli.runtime import read_sidecar
+
+    try:
+        sidecar = read_sidecar(path)
+        role, exported_for = sidecar["role"], sidecar["scenario"]
+        run, fingerprint, model_hash = sidecar["checkpoint"].get("run"), exported_for["fingerprint"], sidecar["model_sha256"]
+    except PecliError as exc:
+        skipped.append(str(exc))
+        return None
+    except (KeyError, TypeError, AttributeError):
+        skipped.append(f"{path}: incomplete sidecar")
+        return None
+    identity = _file_hash(path)
+    if not str(model_hash).startswith(identity):
+        skipped.append(f"{path}: does not match its sidecar (damaged or changed model)")
+        return None
+    if fingerprint != scenario.fingerprint() or role not in ROLES:
+        skipped.append(f"{path}: exported for scenario '{exported_for.get('name')}', not '{scenario.name}'")
+        return None
+    name = f"{run}/{role}/{path.stem}.onnx" if run else path.name
+    return Player(name=name, spec=str(path.resolve()), role=role, identity=identity)
+
+
+def _file_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
+    """A checkpoint (``.zip``) or an exported model (``.onnx``) given by its path."""
+    if path.suffix.lower() == ".onnx":
+        return _exported_player(path, scenario, skipped)
+    return _checkpoint_player(path, scenario, skipped)
+
+
 def _unique_names(players: list[Player]) -> list[Player]:
     """Players whose names collide (two runs of one name in two zoos) get their path instead."""
     counts: dict[str, int] = {}
@@ -107,10 +139,11 @@ def _unique_names(players: list[Player]) -> list[Player]:
 
 
 def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:
-    """Players from zoo folders, run folders, checkpoint files and ``module:Class`` strings.
+    """Players from zoo folders, run folders, checkpoint files, exported models and ``module:Class`` strings.
 
     A folder contributes every checkpoint with metadata below it, except ``last`` (the resume copy
-    of a run). Checkpoints of another scenario, and files without metadata, are skipped and listed.
+    of a run); exported models (``.onnx``) join only when named. Checkpoints of another scenario,
+    and files without metadata, are skipped and listed.
     """
     players: dict[Role, list[Player]] = {role: [] for role in ROLES}
     skipped: list[str] = []
@@ -125,7 +158,7 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
                 raise PecliError(f"no checkpoints under {entry}")
             candidates = [_checkpoint_player(p, scenario, skipped) for p in found]
         elif path.is_file():
-            candidates = [_checkpoint_player(path, scenario, skipped)]
+            candidates = [_file_player(path, scenario, skipped)]
             if candidates[0] is None:
                 raise PecliError(skipped[-1])
         elif ":" in entry or entry in BUILTINS:

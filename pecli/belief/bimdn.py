@@ -31,11 +31,10 @@ class MixtureHead(nn.Module):
         self.mean_head = _head(width, 2 * components)
 
     def forward(self, z: th.Tensor) -> Mixture:
-        batch = z.shape[0]
         return Mixture(
             logits=self.weight_head(z),
-            means=self.mean_head(z).view(batch, self.components, 2),
-            stds=(F.elu(self.std_head(z)) + 1.0 + MIN_STD).view(batch, self.components, 2),
+            means=self.mean_head(z).view(-1, self.components, 2),
+            stds=(F.elu(self.std_head(z)) + 1.0 + MIN_STD).view(-1, self.components, 2),
         )
 
 

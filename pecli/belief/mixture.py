@@ -44,10 +44,21 @@ class Mixture:
     def sample(self, count: int, generator: th.Generator | None = None) -> th.Tensor:
         """``count`` draws per row, ``(B, count, 2)`` (the paper's "mixed" belief uses 16)."""
         batch = self.logits.shape[0]
-        component = th.multinomial(self.weights, count, replacement=True, generator=generator)  # (B, count)
-        rows = th.arange(batch)[:, None]
-        noise = th.randn((batch, count, 2), generator=generator, dtype=self.means.dtype)
-        return self.means[rows, component] + self.stds[rows, component] * noise
+        uniform = th.rand((batch, count), generator=generator, dtype=self.means.dtype)
+        normal = th.randn((batch, count, 2), generator=generator, dtype=self.means.dtype)
+        return self.sample_with(uniform, normal)
+
+    def sample_with(self, uniform: th.Tensor, normal: th.Tensor) -> th.Tensor:
+        """Draws ``(B, count, 2)`` from given randomness: a component per draw by inverse CDF of
+        ``uniform`` ``(B, count)`` in [0, 1), then its mean plus its std times ``normal`` ``(B, count, 2)``.
+
+        Deterministic given its inputs, so a policy can own its random numbers (and an exported
+        graph can take them as inputs).
+        """
+        cumulative = th.cumsum(self.weights, dim=-1)[:, :-1]  # (B, K-1): the last bound is 1
+        component = (uniform.unsqueeze(-1) >= cumulative.unsqueeze(1)).sum(-1)  # (B, count) in [0, K-1]
+        index = component.unsqueeze(-1).expand(-1, -1, 2)
+        return th.gather(self.means, 1, index) + th.gather(self.stds, 1, index) * normal
 
     def detach(self) -> Mixture:
         return Mixture(self.logits.detach(), self.means.detach(), self.stds.detach())

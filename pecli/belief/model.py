@@ -73,7 +73,6 @@ class BeliefModel(nn.Module):
 
             self.net = None
             self.ukf = WindowUKF(self.decoder)
-        self.generator: th.Generator | None = None  # for bimdn-mixed draws at play time
 
     @property
     def learned(self) -> bool:
@@ -90,11 +89,17 @@ class BeliefModel(nn.Module):
         return self.net(history.reshape(history.shape[0], *self.window))
 
     @th.no_grad()
-    def features(self, history: th.Tensor) -> th.Tensor:
-        """What the actor reads: ``(B, features_dim)``, without gradients (the belief learns on its own loss)."""
+    def features(self, history: th.Tensor, draws: tuple[th.Tensor, th.Tensor] | None = None) -> th.Tensor:
+        """What the actor reads: ``(B, features_dim)``, without gradients (the belief learns on its own loss).
+
+        ``draws`` are the random numbers of a ``bimdn-mixed`` belief, ``uniform (B, samples)`` and
+        ``normal (B, samples, 2)`` (see :meth:`Mixture.sample_with`); without them it draws from torch's RNG.
+        """
         mixture = self.mixture(history)
         if self.kind == "bimdn-mixed":
-            return mixture.sample(self.samples, self.generator).flatten(1)
+            if draws is not None:
+                return mixture.sample_with(*draws).flatten(1)
+            return mixture.sample(self.samples).flatten(1)
         return mixture.mean()
 
     def features_numpy(self, history: np.ndarray) -> np.ndarray:

@@ -16,13 +16,19 @@ from pecli.scenario import Scenario, load_scenario
 
 
 def _scenario_for(paths: list[str], config: str | None) -> Scenario:
-    """The ``--config`` scenario, else the one the first run folder found under ``paths`` was trained on."""
+    """The ``--config`` scenario, else the one the first run folder found under ``paths`` was trained on
+    (or the first exported model was exported for)."""
     from pecli.zoo import Run
 
     if config is not None:
         return load_scenario(config)
     for entry in paths:
         path = Path(entry)
+        if path.is_file() and path.suffix.lower() == ".onnx":
+            from pecli.policies.exported import exported_scenario
+            from pecli.runtime import read_sidecar, sidecar_path
+
+            return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
         folders = [path] if path.is_dir() else [path.parent.parent] if path.is_file() else []
         for folder in folders:
             runs = [folder] if (folder / "config.yaml").is_file() else sorted(
@@ -37,7 +43,8 @@ def _scenario_for(paths: list[str], config: str | None) -> Scenario:
 def tournament(
     paths: Annotated[
         list[str] | None,
-        typer.Argument(help="Zoo folders, run folders, checkpoint files or module:Class policies.", show_default=False),
+        typer.Argument(help="Zoo folders, run folders, checkpoint files, exported .onnx models or module:Class policies.",
+                      show_default=False),
     ] = None,
     config: Annotated[
         str | None,

@@ -1,8 +1,7 @@
 """A trained checkpoint as a :class:`Policy`: SB3's actor with the memory it was trained with.
 
-At play time the policy is called at every game step. Like the training view it keeps a
-history window updated at every step and a frame stack updated at decision steps, and it
-decides every ``frame_skip`` steps, holding its action in between.
+The memory, the decision clock and a mixed belief's random numbers are :class:`WindowedPolicy`'s;
+this module runs the actor (belief network included) at each decision.
 """
 
 from __future__ import annotations
@@ -14,7 +13,7 @@ import numpy as np
 import torch as th
 
 from pecli.errors import PolicyError
-from pecli.game.memory import FrameStack, HistoryWindow
+from pecli.policies.windowed import Draws, WindowedPolicy
 from pecli.roles import Role
 from pecli.scenario import Scenario
 from pecli.zoo import CheckpointMeta, ZooError, read_metadata
@@ -30,7 +29,7 @@ def algorithm_class(algo: str) -> Any:
     return classes[algo]
 
 
-class LearnedPolicy:
+class LearnedPolicy(WindowedPolicy):
     """Plays with the actor of an SB3 model.
 
     Args:
@@ -38,18 +37,26 @@ class LearnedPolicy:
         role: the role it plays.
         scenario: the game; observations have its layout.
         meta: the checkpoint's metadata (frame skip/stack and history window come from it).
+        seed: seed of a mixed belief's draws (:meth:`reset` with a seed restarts them).
     """
 
-    def __init__(self, actor: th.nn.Module, role: Role, scenario: Scenario, meta: CheckpointMeta) -> None:
-        self.actor = actor
-        self.role = role
-        self.scenario = scenario
-        self.meta = meta
-        self.n = 0
-        self._fresh = np.zeros(0, dtype=bool)
-        self._history: HistoryWindow | None = None
-        self._generator: th.Generator | None = None
+    def __init__(
+        self, actor: th.nn.Module, role: Role, scenario: Scenario, meta: CheckpointMeta, seed: int | None = None
+    ) -> None:
         self._belief = getattr(actor.features_extractor, "belief", None)
+        mixed = self._belief is not None and self._belief.kind == "bimdn-mixed"
+        super().__init__(
+            role,
+            scenario,
+            frame_skip=meta.frame_skip,
+            frame_stack=meta.frame_stack,
+            history_length=meta.history_length if meta.belief != "none" else None,
+            history_stride=meta.history_stride,
+            draws=self._belief.samples if mixed else 0,
+            seed=seed,
+        )
+        self.actor = actor
+        self.meta = meta
 
     @classmethod
     def load(cls, path: str | Path, role: Role, scenario: Scenario, seed: int | None = None) -> LearnedPolicy:
@@ -70,70 +77,31 @@ class LearnedPolicy:
             model = algorithm_class(meta.algo).load(path, device="cpu")
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
             raise PolicyError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
-        return cls(model.policy.actor, role, scenario, meta)
-
-    def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
-        if seed is not None:  # the draws of a mixed belief follow the seed
-            self._generator = th.Generator().manual_seed(seed)
-        if mask is None or n != self.n:
-            self.n = n
-            self._fresh = np.ones(n, dtype=bool)
-            self._clock = np.zeros(n, dtype=np.int64)
-            self._action = np.zeros((n, 2), dtype=np.float32)
-            self._stack: FrameStack | None = None
-            self._history = None
-        else:
-            self._fresh |= np.asarray(mask, dtype=bool)
-
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        obs = np.asarray(obs, dtype=np.float32)
-        if obs.shape[0] != self.n:
-            self.reset(obs.shape[0])
-        if self._stack is None:
-            dim = obs.shape[1]
-            self._stack = FrameStack(self.n, dim, self.meta.frame_stack)
-            if self.meta.belief != "none":
-                self._history = HistoryWindow(self.n, dim, self.meta.history_length, self.meta.history_stride)
-        fresh = self._fresh
-        if self._history is not None:
-            self._history.push(obs)
-        if fresh.any():
-            self._clock[fresh] = 0
-            self._stack.reset(obs, mask=fresh)
-            if self._history is not None:
-                self._history.reset(obs, mask=fresh)
-            self._fresh = np.zeros(self.n, dtype=bool)
-        due = self._clock % self.meta.frame_skip == 0
-        self._clock += 1
-        if due.any():
-            batch = {"obs": self._stack.push(obs, mask=due)[due]}
-            if self._history is not None:
-                batch["history"] = self._history.get()[due]
-            self._action[due] = self._forward(batch)
-        return self._action.copy()
+        return cls(model.policy.actor, role, scenario, meta, seed=seed)
 
     def current_belief(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The belief given the window of the last :meth:`act`, for drawing, for the first ``games`` games:
         ``(weights (g, K), means (g, K, 2), stds (g, K, 2))`` in normalised world coordinates;
         ``None`` for a policy without a belief."""
-        if self._belief is None or self._history is None:
+        memory = self.memory(games)
+        if self._belief is None or memory is None or memory[1] is None:
             return None
         with th.no_grad():
-            mixture = self._belief.mixture(th.as_tensor(self._history.get()[:games]))
+            mixture = self._belief.mixture(th.as_tensor(memory[1]))
         return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
 
-    def _forward(self, batch: dict[str, np.ndarray]) -> np.ndarray:
+    def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:
         """SB3's ``Actor.forward`` without its preprocessing, which insists on the training-time keys
-        (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window)."""
-        if self._belief is not None:  # this policy's draws; the model may be shared with a learner
-            previous, self._belief.generator = self._belief.generator, self._generator
-        try:
-            with th.no_grad():
-                features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
-                return self.actor.mu(features).numpy()
-        finally:
-            if self._belief is not None:
-                self._belief.generator = previous
+        (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window):
+        ``actor.mu(actor.features_extractor(batch))``."""
+        batch = {"obs": stack}
+        if history is not None:
+            batch["history"] = history
+        if draws is not None:
+            batch["uniform"], batch["normal"] = draws
+        with th.no_grad():
+            features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
+            return self.actor.mu(features).numpy()
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"

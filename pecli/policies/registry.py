@@ -5,7 +5,8 @@ A policy string is one of:
 * a built-in name: ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk`` (either);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
   take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
-* a file path, loaded by the loader registered for its suffix (checkpoints, exported models).
+* a file path, loaded by the loader registered for its suffix: ``.zip`` checkpoints, ``.onnx``
+  exported models (``pecli export onnx``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,13 @@ def _load_checkpoint(path: Path, role: Role, scenario: Scenario, seed: int | Non
     return LearnedPolicy.load(path, role, scenario, seed)
 
 
-_LOADERS: dict[str, Loader] = {".zip": _load_checkpoint}
+def _load_exported(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    from pecli.policies.exported import ExportedPolicy  # onnxruntime loads only when an export is asked for
+
+    return ExportedPolicy.load(path, role, scenario, seed)
+
+
+_LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported}
 
 
 def register_loader(suffix: str, loader: Loader) -> None:

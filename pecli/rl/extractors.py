@@ -30,7 +30,6 @@ class KeysExtractor(BaseFeaturesExtractor):
         return th.cat([observations[key].flatten(1) for key in self.keys], dim=1)
 
 
-
 class BeliefExtractor(BaseFeaturesExtractor):
     """The actor's extractor with a belief: ``[obs, belief features]``.
 
@@ -52,5 +51,6 @@ class BeliefExtractor(BaseFeaturesExtractor):
         if "belief" in observations:
             features = observations["belief"]
         else:
-            features = self.belief.features(observations["history"])
+            draws = (observations["uniform"], observations["normal"]) if "uniform" in observations else None
+            features = self.belief.features(observations["history"], draws)
         return th.cat([observations["obs"], features], dim=1)

@@ -1,0 +1,279 @@
+"""The robot runtime: an exported policy on a robot, with NumPy and ONNX Runtime only.
+
+Nothing here imports torch, Stable-Baselines3 or the simulator, so a robot needs only ``numpy``
+and ``onnxruntime`` besides this package (``pip install --no-deps pecli`` works)::
+
+    >>> from pecli.runtime import Controller
+    >>> controller = Controller.load("final.onnx", seed=0)   # reads final.onnx.json beside it
+    >>> controller.reset()                                   # at the start of a game
+    >>> command = controller.step(own_state, opponent_state) # once per control tick (10 Hz)
+    >>> steering_velocity, acceleration = command            # rad/s and m/s^2 for a car
+
+:class:`ExportedModel` is the graph with its sidecar, batched and stateless. :class:`Controller` is
+one player on one robot: it keeps the frame stack and the history window, decides every
+``frame_skip`` ticks and holds its command in between, exactly as :mod:`pecli.game.memory` and
+``pecli.policies.windowed`` do in simulation. See ``docs/export.md`` for the layout and units.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pecli.errors import ExportError
+
+FORMAT = "pecli-onnx/1"
+SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
+
+
+def sidecar_path(model: str | Path) -> Path:
+    """The sidecar of an exported model: ``final.onnx`` → ``final.onnx.json``."""
+    model = Path(model)
+    return model.with_name(model.name + SIDECAR_SUFFIX)
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, hex."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def read_sidecar(model: str | Path) -> dict[str, Any]:
+    """The sidecar of ``model``; :class:`ExportError` if it is missing, damaged or of another format."""
+    path = sidecar_path(model)
+    if not path.is_file():
+        raise ExportError(f"{model}: no sidecar {path.name} beside it (export writes both; copy them together)")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
+        raise ExportError(f"{path}: damaged sidecar ({exc})") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        found = data.get("format") if isinstance(data, dict) else None
+        raise ExportError(f"{path}: not a pecli sidecar of format {FORMAT} (found {found!r})")
+    return data
+
+
+class ExportedModel:
+    """An exported graph and its sidecar: SI state estimates in, SI commands out, batched.
+
+    Args:
+        session: an ``onnxruntime.InferenceSession`` of the graph.
+        sidecar: the sidecar's content (the layout, the control settings, the sensor).
+    """
+
+    def __init__(self, session: Any, sidecar: dict[str, Any]) -> None:
+        self.session = session
+        self.sidecar = sidecar
+        try:
+            control, layout = sidecar["control"], sidecar["layout"]
+            self.role: str = sidecar["role"]
+            self.belief: str = sidecar["belief"]
+            self.scenario_name: str = sidecar["scenario"]["name"]
+            self.scenario_fingerprint: str = sidecar["scenario"]["fingerprint"]
+            self.dt = float(control["dt_s"])
+            self.frame_skip, self.frame_stack = int(control["frame_skip"]), int(control["frame_stack"])
+            self.history_length, self.history_stride = int(control["history_length"]), int(control["history_stride"])
+            self.dim, self.own_dim, self.opponent_dim = int(layout["dim"]), int(layout["own_dim"]), int(layout["opponent_dim"])
+            self.own_heading = bool(layout["own_heading"])
+            self.draws = int(layout["draws"])
+            self.sensor_range, self.sensor_fov = float(sidecar["sensor"]["range_m"]), float(sidecar["sensor"]["fov_rad"])
+            self.limits = np.asarray(sidecar["command_limits"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
+        self.window = -(-self.history_length // self.history_stride)
+        self.has_history = self.belief != "none"
+        expected = {"obs": [self.frame_stack, self.dim]}
+        if self.has_history:
+            expected["history"] = [self.window, self.dim]
+        if self.draws:
+            expected.update(uniform=[self.draws], normal=[self.draws, 2])
+        found = {node.name: list(node.shape[1:]) for node in session.get_inputs()}
+        if found != expected:
+            raise ExportError(f"the graph's inputs {found} do not match its sidecar's {expected} (shapes after the batch)")
+        self.outputs = [node.name for node in session.get_outputs()]
+
+    @classmethod
+    def load(cls, path: str | Path, threads: int = 1) -> ExportedModel:
+        """Load ``path`` and its sidecar; refuses a model that is missing, damaged or not its sidecar's."""
+        path = Path(path)
+        if not path.is_file():
+            raise ExportError(f"no exported model at {path}")
+        sidecar = read_sidecar(path)
+        if sidecar.get("model_sha256") != file_sha256(path):
+            raise ExportError(f"{path} does not match its sidecar {sidecar_path(path).name} (SHA-256 differs): "
+                              "the model was changed or damaged; export it again")
+        return cls.from_bytes(path.read_bytes(), sidecar, threads, source=str(path))
+
+    @classmethod
+    def from_bytes(cls, model: bytes, sidecar: dict[str, Any], threads: int = 1, source: str = "model") -> ExportedModel:
+        """A model from the graph's bytes (serialised ONNX) and its sidecar."""
+        try:
+            import onnxruntime as ort
+        except ImportError:
+            raise ExportError("exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')") from None
+
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.log_severity_level = 3
+        try:
+            session = ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own exception types for damaged graphs
+            raise ExportError(f"{source}: cannot load the ONNX graph ({type(exc).__name__}: {exc})") from None
+        return cls(session, sidecar)
+
+    def run(
+        self,
+        obs: np.ndarray,
+        history: np.ndarray | None = None,
+        uniform: np.ndarray | None = None,
+        normal: np.ndarray | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Run the graph on a batch of ``B``.
+
+        Args:
+            obs: the last ``frame_stack`` SI rows at decision ticks, oldest first, ``(B, frame_stack, dim)``.
+            history: the window, every ``history_stride``-th SI row, oldest first, zero rows before the
+                start, ``(B, window, dim)``; for a model with a belief.
+            uniform, normal: a mixed belief's random numbers, ``(B, draws)`` in [0, 1) and ``(B, draws, 2)``
+                standard normal.
+
+        Returns:
+            ``command (B, 2)`` SI, ``action (B, 2)`` in [-1, 1], and with a belief ``belief_weights (B, K)``,
+            ``belief_means (B, K, 2)`` and ``belief_stds (B, K, 2)`` in metres, world frame.
+        """
+        feed = {"obs": np.asarray(obs, dtype=np.float64)}
+        if self.has_history:
+            if history is None:
+                raise ValueError("this model has a belief: pass the history window")
+            feed["history"] = np.asarray(history, dtype=np.float64)
+        if self.draws:
+            if uniform is None or normal is None:
+                raise ValueError("this model has a mixed belief: pass its uniform and normal draws")
+            feed["uniform"] = np.asarray(uniform, dtype=np.float32)
+            feed["normal"] = np.asarray(normal, dtype=np.float32)
+        return dict(zip(self.outputs, self.session.run(self.outputs, feed)))
+
+    def sees(self, own: np.ndarray, opponent: np.ndarray) -> bool:
+        """Whether this player's sensor sees ``opponent`` from ``own`` (SI states; the game's wedge test)."""
+        dx, dy = float(opponent[0] - own[0]), float(opponent[1] - own[1])
+        distance = math.sqrt(dx * dx + dy * dy)
+        seen = distance <= self.sensor_range
+        if seen and self.own_heading and self.sensor_fov < 2.0 * math.pi:
+            seen = math.cos(own[4]) * dx + math.sin(own[4]) * dy >= math.cos(0.5 * self.sensor_fov) * distance
+        return bool(seen)
+
+
+class Controller:
+    """One exported player on one robot, fed one state estimate per control tick.
+
+    Args:
+        model: the exported model.
+        seed: seed of a mixed belief's random numbers (the same seed as ``pecli play`` gives the same draws).
+    """
+
+    def __init__(self, model: ExportedModel, seed: int | None = None) -> None:
+        self.model = model
+        self.rng = np.random.default_rng(seed)
+        # positions back from the newest row, oldest first: (window - 1) * stride, ..., stride, 0
+        self._back = np.arange(model.window - 1, -1, -1) * model.history_stride
+        self.reset()
+
+    @classmethod
+    def load(cls, path: str | Path, seed: int | None = None, threads: int = 1) -> Controller:
+        """A controller for the exported model at ``path`` (its sidecar beside it)."""
+        return cls(ExportedModel.load(path, threads), seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start a new game: forget the past, restart the clock (and the draws, given a seed)."""
+        m = self.model
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self.ticks = 0
+        self.stack = np.zeros((m.frame_stack, m.dim))
+        self.buffer = np.zeros((m.history_length, m.dim))  # a ring of the last history_length rows
+        self.cursor = 0
+        self.command = np.zeros(2)
+        self.outputs: dict[str, np.ndarray] = {}
+
+    def row(self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None,
+            time: float | None = None) -> np.ndarray:
+        """The SI row of this tick: own state, opponent state (zeros unless seen), seen flag, time (s).
+
+        ``seen=None`` applies the player's sensor (range and field of view from the sidecar) to
+        ``opponent``; ``time=None`` counts ticks since :meth:`reset` times ``dt``.
+        """
+        m = self.model
+        own = _vector(own, m.own_dim, "own state")
+        if opponent is not None:
+            opponent = _vector(opponent, m.opponent_dim, "opponent state")
+        if seen is None:
+            seen = opponent is not None and m.sees(own, opponent)
+        if seen and opponent is None:
+            raise ValueError("seen=True needs the opponent's state")
+        out = np.zeros(m.dim)
+        out[: m.own_dim] = own
+        if seen:
+            out[m.own_dim : m.own_dim + m.opponent_dim] = opponent
+        out[-2] = 1.0 if seen else -1.0
+        out[-1] = self.ticks * m.dt if time is None else float(time)
+        return out
+
+    def step(self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None,
+             time: float | None = None) -> np.ndarray:
+        """The command ``(2,)`` in SI units for this tick (see :meth:`row` for the arguments).
+
+        A car's command is (steering velocity rad/s, acceleration m/s^2); a point mass's
+        (a_x, a_y) m/s^2 in the world frame. Between decisions (every ``frame_skip`` ticks) the
+        last command is held, as in training.
+        """
+        m = self.model
+        row = self.row(own, opponent, seen, time)
+        self.buffer[self.cursor] = row  # the window holds zeros before a game's first row (reset)
+        self.cursor = (self.cursor + 1) % m.history_length
+        if self.ticks == 0:  # a game's first tick fills the frame stack with its row
+            self.stack[:] = row
+        if self.ticks % m.frame_skip == 0:
+            self.stack = np.concatenate([self.stack[1:], row[None]])
+            self.outputs = self._run()
+            self.command = self.outputs["command"][0].copy()
+        self.ticks += 1
+        return self.command.copy()
+
+    def window(self) -> np.ndarray:
+        """The history window ``(window, dim)``: every ``history_stride``-th row, oldest first."""
+        index = (self.cursor - 1 - self._back) % self.model.history_length
+        return self.buffer[index]
+
+    def belief(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The belief at the last decision: weights ``(K,)``, means ``(K, 2)`` m and stds ``(K, 2)`` m, world frame."""
+        if "belief_means" not in self.outputs:
+            return None
+        return self.outputs["belief_weights"][0], self.outputs["belief_means"][0], self.outputs["belief_stds"][0]
+
+    def _run(self) -> dict[str, np.ndarray]:
+        m = self.model
+        uniform = normal = None
+        if m.draws:  # the same calls, in the same order, as pecli.policies.windowed
+            uniform = self.rng.random((1, m.draws), dtype=np.float32)
+            normal = self.rng.standard_normal((1, m.draws, 2), dtype=np.float32)
+        history = self.window()[None] if m.has_history else None
+        return m.run(self.stack[None], history, uniform, normal)
+
+
+def _vector(values: Any, size: int, what: str) -> np.ndarray:
+    out = np.asarray(values, dtype=np.float64).reshape(-1)
+    if out.shape != (size,):
+        raise ValueError(f"{what} must have {size} numbers, got {out.size}")
+    if not np.isfinite(out).all():
+        raise ValueError(f"{what} must be finite, got {out.tolist()}")
+    return out

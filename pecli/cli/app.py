@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from pecli import __version__
-from pecli.cli import config, play, tournament, train, zoo
+from pecli.cli import config, hj, play, tournament, train, zoo
 
 app = typer.Typer(
     name="pecli",
@@ -43,6 +43,7 @@ app.command(name="tournament", rich_help_panel="Play and evaluate")(tournament.t
 app.command(name="train", rich_help_panel="Learn")(train.train)
 app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")
 app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
+app.add_typer(hj.app, name="hj", rich_help_panel="Baselines")
 
 
 def main() -> None:

@@ -22,37 +22,51 @@ _EPS = 1e-6  # windows this close to a whole number of cells are whole
 _DIRECT_UP_TO = 4  # whole-cell reach up to which shifted comparisons replace SciPy's filter
 
 
-def window_extreme(values: np.ndarray, axis: int, reach: float, kind: Extreme) -> np.ndarray:
+def window_extreme(
+    values: np.ndarray,
+    axis: int,
+    reach: float,
+    kind: Extreme,
+    out: np.ndarray | None = None,
+    scratch: np.ndarray | None = None,
+) -> np.ndarray:
     """``out[i] = kind over δ ∈ [-reach, reach] of values(i + δ)`` along ``axis``, linear between nodes.
 
-    ``reach`` is in cells (``a dt / h``). The result has the shape and dtype of ``values``.
+    ``reach`` is in cells (``a dt / h``). The result has the shape and dtype of ``values``; it is
+    written into ``out`` if given (not ``values`` itself), and ``scratch`` (same shape) is used for
+    the end points, so that a caller repeating this on large arrays allocates nothing.
     """
     whole = int(math.floor(reach + _EPS))
     frac = reach - whole
     combine = np.maximum if kind == "max" else np.minimum
-    sliding = maximum_filter1d if kind == "max" else minimum_filter1d
+    n = values.shape[axis]
     if whole > _DIRECT_UP_TO:
-        out = sliding(values, 2 * whole + 1, axis=axis, mode="nearest")
+        sliding = maximum_filter1d if kind == "max" else minimum_filter1d
+        out = sliding(values, 2 * whole + 1, axis=axis, mode="nearest", output=out)
     else:  # a few shifted comparisons beat the general filter on small windows
-        out = values.copy()
-        n = values.shape[axis]
+        if out is None:
+            out = values.copy()
+        else:
+            np.copyto(out, values)
         for shift in range(1, min(whole, n - 1) + 1):
             head, tail = _along(axis, 0, n - shift), _along(axis, shift, n)
             combine(out[head], values[tail], out=out[head])  # clamped indices repeat the edge: nothing to add
             combine(out[tail], values[head], out=out[tail])
-    if frac > _EPS:  # the interpolated end points of the window, at i + reach and i - reach
-        for sign in (1, -1):
-            near = _shifted(values, sign * whole, axis)
-            far = _shifted(values, sign * (whole + 1), axis)
-            combine(out, near + frac * (far - near), out=out)
+    if frac > _EPS and n > whole + 1:
+        # the interpolated end points at i + reach and i - reach; where they fall past the edge both
+        # of their nodes clamp to the edge node, which the window holds already
+        scratch = np.empty_like(values) if scratch is None else scratch
+        ahead, behind = _along(axis, 0, n - whole - 1), _along(axis, whole + 1, n)
+        for near, far, into in (
+            (_along(axis, whole, n - 1), _along(axis, whole + 1, n), ahead),
+            (_along(axis, 1, n - whole), _along(axis, 0, n - whole - 1), behind),
+        ):
+            end = scratch[into]
+            np.subtract(values[far], values[near], out=end)
+            end *= frac
+            end += values[near]
+            combine(out[into], end, out=out[into])
     return out
-
-
-def _shifted(values: np.ndarray, offset: int, axis: int) -> np.ndarray:
-    """``values(i + offset)`` along ``axis`` with indices clamped to the axis ("nearest")."""
-    n = values.shape[axis]
-    index = np.clip(np.arange(n) + offset, 0, n - 1)
-    return np.take(values, index, axis=axis)
 
 
 def _along(axis: int, start: int, stop: int) -> tuple[slice, ...]:

@@ -32,14 +32,14 @@ OrderOption = Annotated[
 ]
 
 
-def _problem(config: str, model: str, grid: str | None, order: str, steps: int | None):
+def _problem(config: str, model: str, grid: str | None, order: str, steps: int | None, backend: str):
     from pecli.hj.grid import parse_sizes
     from pecli.hj.problem import Problem
     from pecli.scenario import load_scenario
 
     scenario = load_scenario(config)
     sizes = parse_sizes(grid) if grid is not None else None
-    return scenario, Problem.for_scenario(scenario, model, sizes, order, steps)  # type: ignore[arg-type]
+    return scenario, Problem.for_scenario(scenario, model, sizes, order, steps, backend)  # type: ignore[arg-type]
 
 
 @app.command("solve")
@@ -54,6 +54,10 @@ def solve(
         Path | None, typer.Option("--out", "-o", help="Solution file (.npz); default: the cache (see `pecli hj list`).")
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="Solve again even if a solution with the same key exists.")] = False,
+    backend: Annotated[
+        str, typer.Option("--backend", help="numpy (the game's discrete time) or hj-reachability (JAX, continuous "
+                          'time, rel4d; pip install "pecli[hj]").')
+    ] = "numpy",
     as_json: Annotated[bool, typer.Option("--json", help="Print the solution's summary as JSON.")] = False,
 ) -> None:
     """Solve the point mass vs point mass game on a grid and keep the value function.
@@ -66,7 +70,7 @@ def solve(
 
     if out is not None and out.suffix != ".npz":
         raise PecliError(f"--out must end in .npz, got '{out.name}'")
-    scenario, problem = _problem(config, model, grid, order, steps)
+    scenario, problem = _problem(config, model, grid, order, steps, backend)
     err_console.print(f"{scenario.name}: {problem.describe()} ({problem.grid.size:,} nodes)", highlight=False)
     with Progress(
         TextColumn("[bold]solving"), BarColumn(), MofNCompleteColumn(), TextColumn("steps"),
@@ -92,7 +96,8 @@ def _policy_string(problem, path: Path, out: Path | None) -> str:
     from pecli.hj.grid import DEFAULT_SIZES
     from pecli.hj.problem import DEFAULT_ORDER
 
-    default = problem.sizes == DEFAULT_SIZES[problem.model] and problem.order == DEFAULT_ORDER and out is None
+    default = (problem.sizes == DEFAULT_SIZES[problem.model] and problem.order == DEFAULT_ORDER
+               and problem.backend == "numpy" and out is None)
     if default:
         return "hj" if problem.model == "rel4d" else f"hj:model={problem.model}"
     return f"hj:{path}"
@@ -125,7 +130,7 @@ def show(
 def list_cache(
     folder: Annotated[Path | None, typer.Argument(help="Folder of solutions (default: the cache).")] = None,
 ) -> None:
-    """List cached solutions: scenario, model, grid, order, horizon, solve time, file."""
+    """List cached solutions: scenario, model, grid, order, horizon, backend, solve time, file."""
     from pecli.hj.cache import cache_dir
     from pecli.hj.solution import Solution, SolutionError
 
@@ -135,17 +140,17 @@ def list_cache(
         console.print(f"{folder}: no HJ solutions yet (make one with `pecli hj solve`)", highlight=False)
         return
     table = Table(title=f"HJ solutions in {folder}")
-    for column in ("scenario", "model", "grid", "order", "T", "seconds", "file"):
+    for column in ("scenario", "model", "grid", "order", "T", "backend", "seconds", "file"):
         table.add_column(column, justify="right" if column in ("T", "seconds") else "left",
                          overflow="fold" if column == "file" else "ellipsis")
     for path in files:
         try:
             s = Solution.load(path)
         except SolutionError as exc:
-            table.add_row("", "", "", "", "", "", f"{path.name} [red]({exc})[/]")
+            table.add_row("", "", "", "", "", "", "", f"{path.name} [red]({exc})[/]")
             continue
         table.add_row(str(s.meta.get("scenario", "")), s.grid.model, s.grid.describe(), s.problem.order,
-                      str(s.problem.steps), f"{s.meta.get('seconds', 0):.1f}", path.name)
+                      str(s.problem.steps), s.problem.backend, f"{s.meta.get('seconds', 0):.1f}", path.name)
     console.print(table)
 
 

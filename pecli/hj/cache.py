@@ -2,7 +2,7 @@
 
 The folder is ``$PECLI_HJ_CACHE`` if set, else ``$XDG_CACHE_HOME/pecli/hj`` (``~/.cache/pecli/hj``).
 A file is named ``<model>-<key>.npz``; the key (:meth:`pecli.hj.problem.Problem.key`) hashes the
-game's numbers, the model, the grid, the order, the horizon and the solver's version, so any change
+game's numbers, the model, the grid, the order, the horizon, the backend and the solver's version, so any change
 to one of them misses the cache, and an unreadable file is solved again.
 """
 
@@ -59,8 +59,13 @@ def solve_cached(
     if not force and (found := cached(problem, path)) is not None:
         return found, path, True
     start = time.perf_counter()
-    values = solve(problem, on_step=on_step)
-    meta = {"scenario": scenario_name, "seconds": round(time.perf_counter() - start, 3), "backend": "numpy"}
+    if problem.backend == "hj-reachability":
+        from pecli.hj.reachability import solve_with_hj_reachability
+
+        values = solve_with_hj_reachability(problem)
+    else:
+        values = solve(problem, on_step=on_step)
+    meta = {"scenario": scenario_name, "seconds": round(time.perf_counter() - start, 3)}
     solution = Solution(problem=problem, values=values, meta=meta)
     solution.save(path)
     return solution, path, False

@@ -24,6 +24,8 @@ from pecli.scenario import PointMassAgent, Scenario
 Order = Literal["maxmin", "minmax"]
 ORDERS: tuple[Order, ...] = ("maxmin", "minmax")
 DEFAULT_ORDER: Order = "maxmin"
+Backend = Literal["numpy", "hj-reachability"]
+BACKENDS: tuple[Backend, ...] = ("numpy", "hj-reachability")
 SOLVER_VERSION = 1  # part of every key: bump it when the solver's results change
 
 
@@ -72,6 +74,8 @@ class Problem:
             velocity axis, see :mod:`pecli.hj.grid`).
         order: ``maxmin`` (the evader commits first and the pursuer answers) or ``minmax`` (the other way).
         steps: the horizon in game steps.
+        backend: ``numpy`` (:mod:`pecli.hj.solver`, the game's discrete time) or ``hj-reachability``
+            (:mod:`pecli.hj.reachability`, continuous time, ``rel4d`` only).
     """
 
     game: PointMassGame
@@ -79,6 +83,7 @@ class Problem:
     sizes: tuple[int, int] = DEFAULT_SIZES["rel4d"]
     order: Order = DEFAULT_ORDER
     steps: int = 100
+    backend: Backend = "numpy"
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -87,6 +92,10 @@ class Problem:
             raise ConfigError(f"unknown order '{self.order}' (known: {', '.join(ORDERS)})")
         if self.steps < 1:
             raise ConfigError(f"the horizon must be at least 1 step, got {self.steps}")
+        if self.backend not in BACKENDS:
+            raise ConfigError(f"unknown HJ backend '{self.backend}' (known: {', '.join(BACKENDS)})")
+        if self.backend == "hj-reachability" and self.model != "rel4d":
+            raise ConfigError(f"the hj-reachability backend solves rel4d only, not {self.model}")
         object.__setattr__(self, "sizes", tuple(int(n) for n in self.sizes))
         self.grid  # noqa: B018 - validates the sizes now, not at the first use
 
@@ -98,6 +107,7 @@ class Problem:
         sizes: tuple[int, int] | None = None,
         order: Order = DEFAULT_ORDER,
         steps: int | None = None,
+        backend: Backend = "numpy",
     ) -> Problem:
         """The problem of ``scenario``'s game; the grid defaults to the model's, the horizon to T."""
         if model not in MODELS:
@@ -108,6 +118,7 @@ class Problem:
             sizes=sizes or DEFAULT_SIZES[model],
             order=order,
             steps=scenario.horizon if steps is None else steps,
+            backend=backend,
         )
 
     @cached_property
@@ -132,6 +143,7 @@ class Problem:
             "sizes": list(self.sizes),
             "order": self.order,
             "steps": self.steps,
+            "backend": self.backend,
         }
 
     @classmethod
@@ -142,6 +154,7 @@ class Problem:
             sizes=tuple(data["sizes"]),
             order=data["order"],
             steps=int(data["steps"]),
+            backend=data["backend"],
         )
 
     def key(self) -> str:
@@ -151,4 +164,5 @@ class Problem:
 
     def describe(self) -> str:
         """``rel4d 23x81x23x81 maxmin T=100`` style."""
-        return f"{self.model} {self.grid.describe()} {self.order} T={self.steps}"
+        backend = "" if self.backend == "numpy" else f" ({self.backend})"
+        return f"{self.model} {self.grid.describe()} {self.order} T={self.steps}{backend}"

@@ -33,7 +33,7 @@ class Solution:
 
     problem: Problem
     values: np.ndarray
-    meta: dict[str, Any] = field(default_factory=dict)  # scenario, seconds, backend, pecli version
+    meta: dict[str, Any] = field(default_factory=dict)  # scenario, seconds
 
     @property
     def grid(self) -> Grid:
@@ -52,6 +52,7 @@ class Solution:
             "grid": self.grid.describe(),
             "order": self.problem.order,
             "steps": self.problem.steps,
+            "backend": self.problem.backend,
             "game": asdict(self.problem.game),
             "axes": {a.name: [a.low, a.high, a.n] for a in self.grid.axes},
             "capture_share": captured,

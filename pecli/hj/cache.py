@@ -2,8 +2,8 @@
 
 The folder is ``$PECLI_HJ_CACHE`` if set, else ``$XDG_CACHE_HOME/pecli/hj`` (``~/.cache/pecli/hj``).
 A file is named ``<model>-<key>.npz``; the key (:meth:`pecli.hj.problem.Problem.key`) hashes the
-game's numbers, the model, the grid, the order, the horizon, the backend and the solver's version, so any change
-to one of them misses the cache, and an unreadable file is solved again.
+game's numbers, the model, the grid, the order, the horizon, the backend and the solver's version,
+so any change to one of them misses the cache, and an unreadable file is solved again.
 """
 
 from __future__ import annotations

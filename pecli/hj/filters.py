@@ -4,7 +4,8 @@ A player with acceleration bound ``a`` moves a velocity by any ``δ ∈ [-a dt, 
 grid of spacing ``h`` that is a window of ``reach = a dt / h`` cells, usually not a whole number.
 The linear interpolant is piecewise linear between nodes, so its maximum over the window is the
 maximum over the whole nodes inside it and the two interpolated end points: a sliding-window
-filter (SciPy's ``maximum_filter1d``) plus two shifted linear interpolations. Past the grid's
+filter (a few shifted comparisons for small windows, SciPy's ``maximum_filter1d`` for wide ones)
+plus two shifted linear interpolations, all on slices (no copies of shifted arrays). Past the grid's
 edge the value of the edge node is used ("nearest"), which is exactly the game's clipping of a
 velocity to its limit when the axis ends at that limit.
 """

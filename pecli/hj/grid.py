@@ -75,22 +75,9 @@ class Grid:
     def size(self) -> int:
         return int(np.prod(self.shape))
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(axis.name for axis in self.axes)
-
     def describe(self) -> str:
-        """``31x61x31x61`` style."""
+        """``23x81x23x81`` style."""
         return "x".join(str(n) for n in self.shape)
-
-    def to_dict(self) -> dict:
-        return {"model": self.model, "axes": [[a.name, a.low, a.high, a.n] for a in self.axes]}
-
-    @classmethod
-    def from_dict(cls, data: dict) -> Grid:
-        axes = tuple(Axis(str(name), float(low), float(high), int(n)) for name, low, high, n in data["axes"])
-        half = len(axes) // 2
-        return cls(model=data["model"], x_axes=axes[:half], y_axes=axes[half:])
 
     # ------------------------------------------------------------------ states
     def points(self, pursuer_pos: np.ndarray, pursuer_vel: np.ndarray, evader_pos: np.ndarray,
@@ -127,8 +114,9 @@ class Grid:
 
     def gradient(self, values: np.ndarray, points: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
         """Central differences ``(n, len(axes))`` of the interpolated value along ``axes``, one node spacing wide
-        (one-sided at the grid's edges); units: value per unit of each axis."""
+        (one-sided at the grid's edges; points outside are moved onto it); units: value per unit of each axis."""
         out = np.empty((points.shape[0], len(axes)))
+        points = np.clip(points, [a.low for a in self.axes], [a.high for a in self.axes])
         for j, k in enumerate(axes):
             axis = self.axes[k]
             ahead, behind = points.copy(), points.copy()

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pecli import __version__
-from pecli.errors import PecliError
+from pecli.errors import ConfigError, PecliError
 from pecli.hj.grid import Grid
 from pecli.hj.problem import PointMassGame, Problem
 from pecli.io import atomic_path
@@ -80,7 +80,7 @@ class Solution:
                 meta = json.loads(str(data["meta"]))
                 values = data["values"]
             problem = Problem.from_dict(meta.pop("problem"))
-        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, ConfigError) as exc:
             raise SolutionError(f"{path}: not a readable HJ solution ({type(exc).__name__}: {exc})") from None
         if values.shape != problem.grid.shape:
             raise SolutionError(f"{path}: values of shape {values.shape} do not fit the grid {problem.grid.describe()}")

@@ -54,6 +54,7 @@ def capture_target(grid: Grid, capture_distance: float, dt: float | None = None)
     interpolation) keeps the capture disk sharp.
     """
     (x_now, x_next), (y_now, y_next) = (_positions(grid, axes, dt or 0.0) for axes in (grid.x_axes, grid.y_axes))
+    # the value array is (x half, y half) flattened: every x node against every y node
     values = np.hypot(x_now[:, None], y_now[None, :])
     if dt is not None:
         np.minimum(values, np.hypot(x_next[:, None], y_next[None, :]), out=values)
@@ -135,7 +136,7 @@ class Iteration:
         self.buffers = [np.empty(self.target.shape, np.float32) for _ in range(3)]
 
     def __call__(self, values: np.ndarray) -> None:
-        first, second, scratch = self.buffers[:3]
+        first, second, scratch = self.buffers
         source, into = values, first
         for kind, axis, reach in self.filters:  # the inputs: each player's window along each velocity axis
             window_extreme(source, axis, reach, kind, out=into, scratch=scratch)  # type: ignore[arg-type]

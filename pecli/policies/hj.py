@@ -26,11 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from pecli.errors import PolicyError
+from pecli.errors import ConfigError, PolicyError
 from pecli.game.dynamics import PointMassDynamics
 from pecli.game.observation import Decoded
 from pecli.hj.cache import cache_dir, cache_path
-from pecli.hj.grid import MODELS
 from pecli.hj.problem import Problem
 from pecli.hj.solution import Solution, SolutionError
 from pecli.io import file_digest
@@ -99,7 +98,7 @@ class HJPolicy(HeuristicPolicy):
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs)
-        if self.belief is not None and obs.ndim == 2:
+        if self.belief is not None and obs.ndim == 2 and obs.shape[1] == self.codec.dim:
             if obs.shape[0] != self.n:
                 self.reset(obs.shape[0])
             self.belief.act(obs)  # keeps the belief's history window; the action is not used
@@ -182,11 +181,9 @@ def load_hj_policy(options: str, role: Role, scenario: Scenario, seed: int | Non
             raise PolicyError(str(exc)) from None
     else:
         model = settings.get("model", "rel4d")
-        if model not in MODELS:
-            raise PolicyError(f"unknown HJ model '{model}' (known: {', '.join(MODELS)})")
         try:
             problem = Problem.for_scenario(scenario, model)  # type: ignore[arg-type]
-        except Exception as exc:  # a scenario without two point masses
+        except ConfigError as exc:  # a scenario without two point masses
             raise PolicyError(str(exc)) from None
         path = cache_path(problem)
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +104,19 @@ def test_bad_problems_are_refused(point_mass: Scenario, paper: Scenario) -> None
         Problem.for_scenario(point_mass, sizes=(2, 11))
     with pytest.raises(ConfigError, match="unknown order"):
         Problem.for_scenario(point_mass, order="sideways")  # type: ignore[arg-type]
+
+
+def test_the_hj_reachability_backend_says_how_to_install_it(point_mass: Scenario, monkeypatch) -> None:
+    from pecli.errors import PecliError
+    from pecli.hj.reachability import solve_with_hj_reachability
+
+    monkeypatch.setitem(sys.modules, "hj_reachability", None)  # as if it were not installed
+    problem = Problem.for_scenario(point_mass, "rel4d", (11, 5), steps=3, backend="hj-reachability")
+    assert problem.key() != Problem.for_scenario(point_mass, "rel4d", (11, 5), steps=3).key()
+    with pytest.raises(PecliError, match='pip install "pecli\\[hj\\]"'):
+        solve_with_hj_reachability(problem)
+    with pytest.raises(ConfigError, match="rel4d only"):
+        Problem.for_scenario(point_mass, "rel6d", backend="hj-reachability")
 
 
 # ---------------------------------------------------------------------- cache
@@ -271,7 +285,7 @@ def test_hj_joins_both_sides_of_a_tournament(coarse: Solution, point_mass: Scena
 
 
 # ---------------------------------------------------------------------- CLI
-def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path) -> None:
+def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     args = ["hj", "solve", "-g", "11,5", "--steps", "3", "--json"]
     first = runner.invoke(app, args)
     assert first.exit_code == 0, first.output
@@ -289,7 +303,9 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path) -> None:
         (["hj", "show", "nothing.npz"], "no HJ solution at"),
         (["hj", "table", "nothing.json"], "nothing.json"),
         (["play", "-p", "hj", "-c", "point_mass"], "pecli hj solve"),
+        (["hj", "solve", "-g", "11,5", "--backend", "hj-reachability"], 'pip install "pecli[hj]"'),
     ):
+        monkeypatch.setitem(sys.modules, "hj_reachability", None)  # not installed, where it is
         result = runner.invoke(app, bad)
         assert result.exit_code == 1, (bad, result.output)
         assert message in result.output and "Traceback" not in result.output

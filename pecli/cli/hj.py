@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.markup import escape
 from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
@@ -56,14 +57,14 @@ def solve(
     force: Annotated[bool, typer.Option("--force", help="Solve again even if a solution with the same key exists.")] = False,
     backend: Annotated[
         str, typer.Option("--backend", help="numpy (the game's discrete time) or hj-reachability (JAX, continuous "
-                          'time, rel4d; pip install "pecli[hj]").')
+                          'time, rel4d; pip install "pecli\\[hj]").')
     ] = "numpy",
     as_json: Annotated[bool, typer.Option("--json", help="Print the solution's summary as JSON.")] = False,
 ) -> None:
     """Solve the point mass vs point mass game on a grid and keep the value function.
 
     The solution is keyed by a hash of everything that decides it (the game's numbers, model, grid,
-    order, horizon, solver version): the same command again reuses it, any change solves anew.
+    order, horizon, backend, solver version): the same command again reuses it, any change solves anew.
     Play it with [bold]-p hj[/] / [bold]-e hj[/] (the default solution in the cache) or [bold]hj:FILE.npz[/].
     """
     from pecli.hj.cache import solve_cached
@@ -147,7 +148,7 @@ def list_cache(
         try:
             s = Solution.load(path)
         except SolutionError as exc:
-            table.add_row("", "", "", "", "", "", "", f"{path.name} [red]({exc})[/]")
+            table.add_row("", "", "", "", "", "", "", f"{escape(path.name)} [red]({escape(str(exc))})[/]")
             continue
         table.add_row(str(s.meta.get("scenario", "")), s.grid.model, s.grid.describe(), s.problem.order,
                       str(s.problem.steps), s.problem.backend, f"{s.meta.get('seconds', 0):.1f}", path.name)

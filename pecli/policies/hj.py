@@ -85,11 +85,9 @@ class HJPolicy(HeuristicPolicy):
     # ------------------------------------------------------------------ memory
     def _allocate(self, n: int) -> None:
         self.opp_state = np.zeros((4, n))  # the estimate: (s_x, s_y, v_x, v_y) rows, SI
-        self.ever_seen = np.zeros(n, dtype=bool)
 
     def _restart(self, mask: np.ndarray) -> None:
-        self.opp_state[:, mask] = 0.0  # the arena's centre, at rest
-        self.ever_seen[mask] = False
+        self.opp_state[:, mask] = 0.0  # the arena's centre, at rest, until the first sighting
 
     def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
         super().reset(n, mask, seed)
@@ -133,7 +131,6 @@ class HJPolicy(HeuristicPolicy):
             state[:, unseen] = moved[:, unseen]
         state[0:2, seen] = view.opp_pos[seen].T
         state[2:4, seen] = view.opp_vel[seen].T
-        self.ever_seen |= seen
         position = state[0:2].T.copy()
         if self.belief is not None and unseen.any():
             position[unseen] = self._belief_mean()[unseen]

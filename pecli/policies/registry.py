@@ -37,16 +37,14 @@ def _load_checkpoint(path: Path, role: Role, scenario: Scenario, seed: int | Non
     return LearnedPolicy.load(path, role, scenario, seed)
 
 
-def _load_hj_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+def _load_hj(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
     from pecli.policies.hj import load_hj_policy  # the HJ solver's modules load only when asked for
 
-    return load_hj_policy(f"solution={path}", role, scenario, seed)
-
-
-def _load_hj(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.hj import load_hj_policy
-
     return load_hj_policy(options, role, scenario, seed)
+
+
+def _load_hj_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    return _load_hj(f"solution={path}", role, scenario, seed)
 
 
 _LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".npz": _load_hj_file}

@@ -1,4 +1,4 @@
-"""Tournament reports: the paper's Table I layout, ratings, CSV/JSON files and a capture-rate heatmap."""
+"""Tournament reports: the paper's Table I and Table II layouts, ratings, CSV/JSON files and a capture-rate heatmap."""
 
 from __future__ import annotations
 
@@ -107,3 +107,70 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------------- Table II
+PAPER_TABLE_II: dict[tuple[str, str], tuple[float, float, float]] = {
+    # (pursuer, evader): (time-to-capture, its σ, capture rate), paper Table II
+    ("optimal control", "optimal control"): (0.62, 0.40, 0.47),
+    ("ours", "optimal control"): (0.46, 0.32, 0.83),
+    ("optimal control", "ours"): (0.62, 0.40, 0.50),
+    ("ours", "ours"): (0.47, 0.32, 0.80),
+}
+
+
+def is_hj_spec(spec: str) -> bool:
+    """Whether a player's policy string is a Hamilton–Jacobi player (``hj``, ``hj:...`` or a ``.npz`` solution)."""
+    return spec == "hj" or spec.startswith("hj:") or spec.endswith(".npz")
+
+
+def table_two(data: dict) -> Table:
+    """A tournament's ``results.json`` in the paper's Table II layout: evaders as rows; per pursuer the
+    normalised time-to-capture (σ), then per pursuer the capture rate. HJ players come first and are
+    called "optimal control"."""
+    players = {r["name"]: r for r in data.get("ratings", [])}
+    pairings = {(p["pursuer"], p["evader"]): p for p in data.get("pairings", [])}
+
+    def ordered(role: str) -> list[str]:
+        names = [name for name, r in players.items() if r.get("role") == role]
+        return sorted(names, key=lambda name: (not is_hj_spec(players[name].get("spec", "")), name))
+
+    pursuers, evaders = ordered("pursuer"), ordered("evader")
+    hj_count = {role: sum(is_hj_spec(players[n].get("spec", "")) for n in names)
+                for role, names in (("pursuer", pursuers), ("evader", evaders))}
+
+    def label(name: str) -> str:
+        if not is_hj_spec(players[name].get("spec", "")):
+            return name
+        return "optimal control" if hj_count[players[name]["role"]] == 1 else f"optimal control ({name})"
+
+    table = Table(
+        title=f"{data.get('scenario', '')}: time-to-capture (σ) and capture rate, Table II layout "
+        f"({data.get('episodes_per_seed', '?')} episodes × {len(data.get('seeds', []))} seeds per pairing)"
+    )
+    table.add_column("evader \\ pursuer", style="bold")
+    for name in pursuers:
+        table.add_column(f"time: {label(name)}", justify="center", overflow="fold")
+    for name in pursuers:
+        table.add_column(f"rate: {label(name)}", justify="center", overflow="fold")
+    for evader in evaders:
+        cells = [pairings.get((pursuer, evader)) for pursuer in pursuers]
+        times = [f"{c['time_to_capture_mean']:.2f} (σ={c['time_to_capture_std']:.2f})" if c else "-" for c in cells]
+        rates = [f"{c['capture_rate']:.2f}" if c else "-" for c in cells]
+        table.add_row(label(evader), *times, *rates)
+    return table
+
+
+def paper_table_two() -> Table:
+    """The paper's Table II (point mass vs point mass), for comparison."""
+    table = Table(title="the paper's Table II (OptimizedDP optimal control vs the paper's BiMDN players)")
+    sides = ("optimal control", "ours")
+    table.add_column("evader \\ pursuer", style="bold")
+    for name in sides:
+        table.add_column(f"time: {name}", justify="center")
+    for name in sides:
+        table.add_column(f"rate: {name}", justify="center")
+    for evader in sides:
+        values = [PAPER_TABLE_II[(pursuer, evader)] for pursuer in sides]
+        table.add_row(evader, *[f"{t:.2f} (σ={s:.2f})" for t, s, _ in values], *[f"{r:.2f}" for _, _, r in values])
+    return table

@@ -25,10 +25,10 @@ from typing import Any
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json
+from pecli.io import atomic_write_json, file_digest
 from pecli.match import play_match
 from pecli.policies import resolve_policy
-from pecli.policies.registry import BUILTINS
+from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
@@ -74,14 +74,6 @@ class Discovery:
     skipped: list[str]
 
 
-def _file_hash(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()[:20]
-
-
 def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
     try:
         meta = read_metadata(path)
@@ -95,7 +87,7 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
         skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")
         return None
     name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
-    return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=_file_hash(path))
+    return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=file_digest(path))
 
 
 def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
@@ -112,7 +104,7 @@ def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Play
     except (KeyError, TypeError, AttributeError):
         skipped.append(f"{path}: incomplete sidecar")
         return None
-    identity = _file_hash(path)
+    identity = file_digest(path)
     if not str(model_hash).startswith(identity):
         skipped.append(f"{path}: does not match its sidecar (damaged or changed model)")
         return None
@@ -139,7 +131,8 @@ def _unique_names(players: list[Player]) -> list[Player]:
 
 
 def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:
-    """Players from zoo folders, run folders, checkpoint files, exported models and ``module:Class`` strings.
+    """Players from zoo folders, run folders, checkpoint files, exported models, ``module:Class`` strings
+    and policy families such as ``hj`` (which join both sides when they play both roles).
 
     A folder contributes every checkpoint with metadata below it, except ``last`` (the resume copy
     of a run); exported models (``.onnx``) join only when named. Checkpoints of another scenario,
@@ -152,7 +145,9 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
             players[role] += [Player(name=n, spec=n, role=role, identity=f"builtin:{n}") for n in names]
     for entry in paths:
         path = Path(entry)
-        if path.is_dir():
+        if family_of(entry) is not None or (path.is_file() and path.suffix.lower() not in (".zip", ".onnx")):
+            candidates = _policy_players(entry, scenario)
+        elif path.is_dir():
             found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST]
             if not found:
                 raise PecliError(f"no checkpoints under {entry}")
@@ -191,6 +186,28 @@ def _class_player(spec: str, scenario: Scenario) -> Player:
             raise
         return Player(name=spec, spec=spec, role=role, identity=f"class:{spec}")
     raise PecliError(f"'{spec}' plays neither role")
+
+
+def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
+    """A policy family (``hj``, ``hj:...``) or a policy file other than a checkpoint (an HJ ``.npz``): one
+    player for every role it can play, named ``<spec>/<role>``, identified by what decides its play."""
+    path = Path(spec)
+    if path.is_file():
+        spec = str(path.resolve())
+    players = []
+    for role in ROLES:
+        try:
+            policy = resolve_policy(spec, role, scenario)
+        except PecliError as exc:
+            if "cannot play" in str(exc) or " plays " in str(exc):
+                continue
+            raise
+        identity = getattr(policy, "identity", None) or f"class:{spec}"
+        name = f"{path.stem if path.is_file() else spec}/{role}"
+        players.append(Player(name=name, spec=spec, role=role, identity=identity))
+    if not players:
+        raise PecliError(f"'{spec}' plays neither role")
+    return players
 
 
 def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed: int = 0) -> list[tuple[Player, Player]]:

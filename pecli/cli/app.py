@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from pecli import __version__
-from pecli.cli import config, export, play, selfplay, tournament, train, zoo
+from pecli.cli import config, export, hj, play, selfplay, tournament, train, zoo
 
 app = typer.Typer(
     name="pecli",
@@ -45,6 +45,7 @@ app.command(name="selfplay", rich_help_panel="Learn")(selfplay.selfplay)
 app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")
 app.add_typer(export.app, name="export", rich_help_panel="Checkpoints")
 app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
+app.add_typer(hj.app, name="hj", rich_help_panel="Baselines")
 
 
 def main() -> None:

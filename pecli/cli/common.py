@@ -10,6 +10,7 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from pecli.errors import PecliError
 
@@ -41,17 +42,18 @@ def user_errors(command: F) -> F:
         except (typer.Exit, typer.Abort, KeyboardInterrupt):
             raise
         except PecliError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
             raise typer.Exit(code=1) from None
         except OSError as exc:  # an unwritable output, a full disk, a path that is not there
             where = f"{exc.filename}: " if exc.filename else ""
-            err_console.print(f"[bold red]error:[/] {where}{exc.strerror or exc}", highlight=False, soft_wrap=True)
+            err_console.print(f"[bold red]error:[/] {escape(f'{where}{exc.strerror or exc}')}", highlight=False,
+                              soft_wrap=True)
             raise typer.Exit(code=1) from None
         except Exception as exc:
             if os.environ.get(DEBUG_VARIABLE):
                 raise
             err_console.print(
-                f"[bold red]internal error:[/] {type(exc).__name__}: {exc} "
+                f"[bold red]internal error:[/] {type(exc).__name__}: {escape(str(exc))} "
                 f"(set {DEBUG_VARIABLE}=1 to see the traceback, and please report it)",
                 highlight=False,
                 soft_wrap=True,

@@ -24,7 +24,7 @@ from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.scenario import load_scenario
 
-POLICY_HELP = "A built-in name ({names}), a policy file, or module:Class."
+POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
 
 
 @user_errors

@@ -1,8 +1,8 @@
-"""Everything that acts: the :class:`Policy` interface, the paper's heuristics, and name resolution."""
+"""Everything that acts: the :class:`Policy` interface, the paper's heuristics, HJ players, and name resolution."""
 
 from pecli.policies.base import HeuristicPolicy, Policy
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
-from pecli.policies.registry import BUILTINS, builtin_names, register_loader, resolve_policy
+from pecli.policies.registry import BUILTINS, builtin_names, register_family, register_loader, resolve_policy
 
 __all__ = [
     "BUILTINS",
@@ -13,6 +13,7 @@ __all__ = [
     "RandomWalk",
     "Rash",
     "builtin_names",
+    "register_family",
     "register_loader",
     "resolve_policy",
 ]

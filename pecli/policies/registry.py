@@ -3,10 +3,12 @@
 A policy string is one of:
 
 * a built-in name: ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk`` (either);
+* a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
+  ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
   take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
 * a file path, loaded by the loader registered for its suffix: ``.zip`` checkpoints, ``.onnx``
-  exported models (``pecli export onnx``).
+  exported models (``pecli export onnx``), ``.npz`` HJ solutions (``pecli hj solve``).
 """
 
 from __future__ import annotations
@@ -41,12 +43,36 @@ def _load_exported(path: Path, role: Role, scenario: Scenario, seed: int | None)
     return ExportedPolicy.load(path, role, scenario, seed)
 
 
-_LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported}
+def _load_hj(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    from pecli.policies.hj import load_hj_policy  # the HJ solver's modules load only when asked for
+
+    return load_hj_policy(options, role, scenario, seed)
+
+
+def _load_hj_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    return _load_hj(f"solution={path}", role, scenario, seed)
+
+
+_LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported, ".npz": _load_hj_file}
+
+Family = Callable[[str, Role, Scenario, "int | None"], Policy]
+_FAMILIES: dict[str, Family] = {"hj": _load_hj}
 
 
 def register_loader(suffix: str, loader: Loader) -> None:
     """Load files ending in ``suffix`` (e.g. ``".zip"``) with ``loader(path, role, scenario, seed)``."""
     _LOADERS[suffix.lower()] = loader
+
+
+def register_family(name: str, factory: Family) -> None:
+    """Resolve ``name`` and ``name:OPTIONS`` with ``factory(options, role, scenario, seed)`` (options may be "")."""
+    _FAMILIES[name] = factory
+
+
+def family_of(spec: str) -> str | None:
+    """The family a policy string names (``"hj"`` for ``hj`` and ``hj:...``), or ``None``."""
+    name = spec.strip().partition(":")[0]
+    return name if name in _FAMILIES else None
 
 
 def builtin_names(role: Role | None = None) -> list[str]:
@@ -63,6 +89,8 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
             plays = " or ".join(cls.roles)
             raise PolicyError(f"'{spec}' plays {plays}, not {role} (for {role}: {', '.join(builtin_names(role))})")
         return cls(scenario, role, seed=seed)
+    if (family := family_of(spec)) is not None:
+        return _FAMILIES[family](spec.partition(":")[2], role, scenario, seed)
     path = Path(spec)
     if path.is_dir():
         raise PolicyError(f"{spec} is a folder: give a checkpoint in it, such as {path / role / 'final.zip'}")
@@ -73,7 +101,7 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
     if path.suffix:
         raise PolicyError(f"policy file not found: {spec}")
     raise PolicyError(
-        f"unknown policy '{spec}' for {role}: use one of {', '.join(builtin_names(role))}, "
+        f"unknown policy '{spec}' for {role}: use one of {', '.join(builtin_names(role) + sorted(_FAMILIES))}, "
         "a file, or module:Class"
     )
 

@@ -151,8 +151,8 @@ def main() -> None:
     print(f"\nlater pursuers beat older evaders more often than earlier pursuers did: {pursuer:.2f} of pairs (> 0.5: yes)")
     print(f"later evaders escape older pursuers more often than earlier evaders did: {evader:.2f} of pairs (> 0.5: yes)")
     steps = scenario.training.selfplay.steps_per_round
-    heatmap(rates, labels, args.out, f"{run.name}: capture rate, generation vs generation "
-                                      f"({steps:,} steps per side per round, {args.episodes} episodes per cell)")
+    heatmap(rates, labels, args.out, f"{run.name}: capture rate, generation vs generation\n"
+                                      f"{steps:,} steps per side per round, {args.episodes} episodes per cell")
     print(f"heatmap: {args.out}")
 
 

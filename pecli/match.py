@@ -117,6 +117,10 @@ def play_match(
         if record:
             frames.append((game.state()[:record], {k: v[:record] for k, v in result.seen.items()}))
         running = int((~game.finished).sum())
+        for player in (pursuer, evader):  # a learned player need not decide for finished games
+            end = getattr(player, "end", None)
+            if end is not None and running < episodes:
+                end(game.finished)
         if on_step is not None:
             on_step(step, running)
         if running == 0:

@@ -7,6 +7,8 @@ import pytest
 
 from pecli.match import MatchResult, play_match
 from pecli.policies import resolve_policy
+from pecli.policies.heuristics import PurePursuit
+from pecli.policies.windowed import WindowedPolicy
 from pecli.scenario import Scenario
 
 
@@ -72,3 +74,25 @@ def test_pure_pursuit_vs_greedy_is_a_contest(quick: Scenario) -> None:
     greedy, _ = play(quick, "greedy", seed=0, episodes=200)
     assert 0.1 < greedy.capture_rate < 0.9
     assert 0.0 < greedy.time_to_capture_mean <= 1.0
+
+
+class Counting(WindowedPolicy):
+    """A learned evader stand-in: one fixed action, and a count of the games it decides for."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        super().__init__("evader", scenario, frame_skip=2, frame_stack=1, history_length=None, history_stride=1)
+        self.decided = 0
+
+    def _decide(self, stack, history, draws, due):
+        self.decided += len(stack)
+        return np.tile([0.3, -0.2], (len(stack), 1))
+
+
+def test_learned_players_skip_games_that_have_ended(quick: Scenario) -> None:
+    skipping, playing = Counting(quick), Counting(quick)
+    playing.end = None  # a player without the hint decides for every game until the last one ends
+    first, _ = play_match(quick, PurePursuit(quick, "pursuer"), skipping, episodes=64, seed=3)
+    second, _ = play_match(quick, PurePursuit(quick, "pursuer"), playing, episodes=64, seed=3)
+    assert np.array_equal(first.captured, second.captured) and np.array_equal(first.steps, second.steps)
+    assert first.captured.any() and skipping.decided < playing.decided
+    assert skipping.decided == sum(-(-int(t) // 2) for t in first.steps)  # one decision per 2 steps of play

@@ -35,6 +35,9 @@ class Policy(Protocol):
         """Actions ``(n, 2)`` in [-1, 1] for observations ``(n, obs_dim)``."""
         ...
 
+    # Optional: ``end(mask)``, told by a match which games have ended (their actions no longer
+    # matter until a reset), so that an expensive policy can skip them. Learned players have it.
+
 
 class HeuristicPolicy(ABC):
     """Shared plumbing of the hand-written baselines: a decoder for observations, per-game memory, an RNG.

@@ -63,10 +63,20 @@ class WindowedPolicy(ABC):
             self._fresh = np.ones(n, dtype=bool)
             self._clock = np.zeros(n, dtype=np.int64)
             self._action = np.zeros((n, 2), dtype=np.float32)
+            self._ended = np.zeros(n, dtype=bool)
             self._stack = None
             self._history = None
         else:
             self._fresh |= np.asarray(mask, dtype=bool)
+            self._ended &= ~np.asarray(mask, dtype=bool)
+
+    def end(self, mask: np.ndarray) -> None:
+        """The games in ``mask`` (``(n,)`` bool) have ended: skip their decisions until they restart.
+
+        A hint from a caller that keeps stepping finished (frozen) games, such as a match: the
+        networks then run only for games still in play. Their memory keeps being updated.
+        """
+        self._ended |= np.asarray(mask, dtype=bool)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
@@ -86,7 +96,7 @@ class WindowedPolicy(ABC):
             if self._history is not None:
                 self._history.reset(obs, mask=fresh)
             self._fresh = np.zeros(self.n, dtype=bool)
-        due = self._clock % self.frame_skip == 0
+        due = (self._clock % self.frame_skip == 0) & ~self._ended
         self._clock += 1
         if due.any():
             stack = self._stack.push(obs, mask=due)[due]

@@ -88,6 +88,13 @@ class ExportedModel:
             self.limits = np.asarray(sidecar["command_limits"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as exc:
             raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
+        positive = {"dt_s": self.dt, "frame_skip": self.frame_skip, "frame_stack": self.frame_stack,
+                    "history_length": self.history_length, "history_stride": self.history_stride, "dim": self.dim}
+        bad = [f"{key} = {value}" for key, value in positive.items() if not value > 0]
+        if self.draws < 0:
+            bad.append(f"draws = {self.draws}")
+        if bad:
+            raise ExportError(f"damaged sidecar: {', '.join(bad)}")
         self.window = -(-self.history_length // self.history_stride)
         self.has_history = self.belief != "none"
         expected = {"obs": [self.frame_stack, self.dim]}
@@ -178,7 +185,8 @@ class Controller:
 
     Args:
         model: the exported model.
-        seed: seed of a mixed belief's random numbers (the same seed as ``pecli play`` gives the same draws).
+        seed: seed of a mixed belief's random numbers: the seed an ``ExportedPolicy`` is reset with draws the
+            same numbers (a match seeds each player with ``pecli.match.policy_seeds(seed)``).
     """
 
     def __init__(self, model: ExportedModel, seed: int | None = None) -> None:

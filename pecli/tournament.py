@@ -34,6 +34,8 @@ from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
 from pecli.zoo import LAST, ZooError, read_metadata
 
+CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
+
 BASELINES: dict[Role, tuple[str, ...]] = {
     "pursuer": ("pure-pursuit",),
     "evader": ("random-walk", "greedy", "rash"),
@@ -238,7 +240,7 @@ def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed:
 
 def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> str:
     """Cache key of a pairing: everything that decides its outcome."""
-    text = json.dumps([__version__, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
+    text = json.dumps([__version__, CACHE_SCHEMA, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 

@@ -247,11 +247,19 @@ def test_runtime_needs_neither_torch_nor_the_simulator(exports, tmp_path: Path) 
         command = controller.step([1.0, 0.5, 0.0, 0.3, 0.2], [2.0, 1.0, 0.5, -0.2])
         assert command.shape == (2,) and abs(command[0]) <= 3.2 and controller.belief()[1].shape == (3, 2)
         print("ok", sorted(m for m in BLOCKED if m in sys.modules))
+        ours = sorted(m for m in sys.modules if m == "pecli" or m.startswith("pecli."))
+        outside = sorted({{m.split(".")[0] for m in sys.modules}} - set(sys.stdlib_module_names)
+                         - {{"numpy", "onnxruntime", "pecli", "cython_runtime"}} - {{m.split(".")[0] for m in sys.builtin_module_names}})
+        print("pecli", ours)
+        print("others", [m for m in outside if not m.startswith("_")])
     """)
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path,
                             env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, timeout=60)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == "ok []"
+    lines = result.stdout.strip().splitlines()
+    assert lines[0] == "ok []"
+    assert lines[1] == "pecli ['pecli', 'pecli.errors', 'pecli.runtime']"  # what docs/export.md says to copy
+    assert lines[2] == "others []", lines[2]  # nothing beyond the standard library, NumPy and ONNX Runtime
 
 
 def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(exports, quick: Scenario,
@@ -324,6 +332,14 @@ def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, 
         sidecar_path(copy).write_text(json.dumps(data))
 
     cases.append(("cannot load the ONNX graph", garbage))
+
+    def zero_skip() -> None:
+        fresh()
+        data = json.loads(sidecar_path(copy).read_text())
+        data["control"]["frame_skip"] = 0
+        sidecar_path(copy).write_text(json.dumps(data))
+
+    cases.append(("damaged sidecar: frame_skip = 0", zero_skip))
     for message, damage in cases:
         copy.unlink(missing_ok=True)
         damage()
@@ -345,7 +361,7 @@ def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, 
     for args, message in (
         (["export", "onnx", str(tmp_path / "nope.zip")], "no checkpoint at"),
         (["export", "onnx", str(checkpoint), "--out", str(tmp_path / "x.txt"), "-n", "1"], "must end in .onnx"),
-        (["export", "onnx", str(checkpoint), "--opset", "3", "-n", "1"], "cannot export to ONNX opset 3"),
+        (["export", "onnx", str(checkpoint), "--opset", "3", "-n", "1"], "--opset must be between 13 and"),
         (["export", "check", str(model), str(exports["bimdn"][0])], "exported from another checkpoint"),
         (["export", "check", str(tmp_path / "nope.onnx"), str(checkpoint)], "no exported model at"),
     ):

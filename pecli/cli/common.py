@@ -25,7 +25,7 @@ ConfigOption = Annotated[
     str,
     typer.Option("--config", "-c", help="Scenario YAML file, or a built-in name: paper, quick, car_vs_car, point_mass, robots."),
 ]
-SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed: the same seed plays the same games.")]
+SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Seed: the same seed plays the same games.")]
 
 
 def user_errors(command: F) -> F:

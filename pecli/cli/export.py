@@ -18,7 +18,7 @@ app = typer.Typer(
 )
 
 EpisodesOption = Annotated[int, typer.Option("--episodes", "-n", help="Recorded games the parity check replays.")]
-SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed of the recorded games.")]
+SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Seed of the recorded games.")]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print the result as one JSON object.")]
 
 
@@ -38,7 +38,7 @@ def _report_table(title: str, parity: dict) -> Table:
 def export_onnx(
     checkpoint: Annotated[Path, typer.Argument(help="A zoo checkpoint (.zip with its metadata).", show_default=False)],
     out: Annotated[Path | None, typer.Option("--out", "-o", help="The model file (default: beside the checkpoint, .onnx).")] = None,
-    opset: Annotated[int, typer.Option("--opset", help="ONNX opset version.")] = 17,
+    opset: Annotated[int, typer.Option("--opset", help="ONNX opset version (13 to the newest the installed torch writes).")] = 17,  # graph.DEFAULT_OPSET
     config: Annotated[
         str | None, typer.Option("--config", "-c", help="The scenario it was trained on (default: its run's config.yaml).")
     ] = None,
@@ -77,7 +77,7 @@ def check(
     episodes: EpisodesOption = 8,
     seed: SeedOption = 0,
     opponent: Annotated[
-        str | None, typer.Option("--opponent", "-o", help="Who the recorded games are played against (default: a heuristic).")
+        str | None, typer.Option("--opponent", help="Who the recorded games are played against (default: a heuristic).")
     ] = None,
     as_json: JsonOption = False,
 ) -> None:

@@ -19,7 +19,7 @@ import torch as th
 from pecli import __version__
 from pecli.errors import ExportError
 from pecli.export.check import ParityReport, check_parity
-from pecli.export.graph import DEFAULT_OPSET, PolicyGraph, to_onnx
+from pecli.export.graph import DEFAULT_OPSET, MIN_OPSET, PolicyGraph, max_opset, to_onnx
 from pecli.export.sidecar import build_sidecar
 from pecli.game.si import SILayout
 from pecli.io import atomic_path, atomic_write_json
@@ -102,20 +102,22 @@ def export_checkpoint(
     checkpoint = Path(checkpoint)
     if not checkpoint.is_file():
         raise ExportError(f"no checkpoint at {checkpoint}")
+    if not MIN_OPSET <= opset <= max_opset():
+        raise ExportError(f"--opset must be between {MIN_OPSET} and {max_opset()}, got {opset}")
+    out = Path(out) if out is not None else checkpoint.with_suffix(".onnx")
+    if out.suffix.lower() != ".onnx":
+        raise ExportError(f"--out must end in .onnx, got '{out.name}'")
     meta = read_metadata(checkpoint)
     scenario = scenario or checkpoint_scenario(checkpoint)
     learned = LearnedPolicy.load(checkpoint, meta.role, scenario)
     layout = SILayout(scenario, meta.role)
     graph, data = onnx_bytes(learned, layout, opset)
     sidecar = build_sidecar(graph, scenario, meta, checkpoint, opset, learned.draws)
-    exported = ExportedPolicy(ExportedModel.from_bytes(data, sidecar), scenario)
+    exported = ExportedPolicy(ExportedModel.from_bytes(data, sidecar, source=str(out)), scenario)
     report = check_parity(exported, learned, scenario, episodes, seed)
     if not report.passed:
         raise ExportError(f"parity check failed: the export's actions differ from the checkpoint's by up to "
                           f"{report.max_action_difference:.3g} (tolerance {report.tolerance:g}); nothing written")
-    out = Path(out) if out is not None else checkpoint.with_suffix(".onnx")
-    if out.suffix.lower() != ".onnx":
-        raise ExportError(f"--out must end in .onnx, got '{out.name}'")
     with atomic_path(out) as tmp:
         tmp.write_bytes(data)
     sidecar.update(model_sha256=hashlib.sha256(data).hexdigest(), parity=report.to_dict())

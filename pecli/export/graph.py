@@ -36,6 +36,14 @@ from pecli.export.encoder import SIEncoder
 from pecli.game.si import SILayout
 
 DEFAULT_OPSET = 17
+MIN_OPSET = 13  # the lowest opset every belief kind's operators export to and load back from
+
+
+def max_opset() -> int:
+    """The highest opset the installed torch exporter writes."""
+    from torch.onnx import _constants
+
+    return int(getattr(_constants, "ONNX_MAX_OPSET", DEFAULT_OPSET))
 
 
 def command_limits(layout: SILayout) -> tuple[float, float]:

@@ -179,7 +179,6 @@ class SelfPlay(_Model):
         default="pfsp",
         description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win",
     )
-    baselines: bool = Field(default=True, description="start each pool with the heuristic baselines")
     pfsp_power: float = Field(default=2.0, gt=0, description="(ours) PFSP weight = P(opponent wins)^power")
     pfsp_prior_episodes: float = Field(
         default=10.0, gt=0, description="(ours) pseudo-episodes of the prior (a tournament's prediction, else 0.5)"

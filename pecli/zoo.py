@@ -192,28 +192,47 @@ class Run:
         atomic_write_json(metadata_path(path), meta.to_dict())
         return path
 
-    def save_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None) -> Path:
-        """Write the model's replay buffer (and, given a ``FitBelief``, the belief's buffer and optimiser)."""
-        path = self.role_dir(role) / REPLAY_BUFFER
+    def save_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None, tag: str = "") -> Path:
+        """Write the model's replay buffer (and, given a ``FitBelief``, the belief's buffer and optimiser)
+        as ``replay_buffer<tag>.pkl`` (and ``belief_fit<tag>.pt``)."""
+        path = self.role_dir(role) / buffer_name(REPLAY_BUFFER, tag)
         with atomic_path(path) as tmp:
             model.save_replay_buffer(tmp)
         if belief_fit is not None:
             import torch
 
-            with atomic_path(self.role_dir(role) / BELIEF_STATE) as tmp:
+            with atomic_path(self.role_dir(role) / buffer_name(BELIEF_STATE, tag)) as tmp:
                 torch.save(belief_fit.state_dict(), tmp)
         return path
 
-    def load_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None) -> None:
-        """Load what :meth:`save_replay_buffer` wrote, where it exists."""
-        path = self.role_dir(role) / REPLAY_BUFFER
-        if path.is_file():
-            model.load_replay_buffer(path)
-        state = self.role_dir(role) / BELIEF_STATE
-        if belief_fit is not None and state.is_file():
-            import torch
+    def load_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None, tag: str = "") -> list[str]:
+        """Load what :meth:`save_replay_buffer` wrote; returns the names of the files that are missing.
+        :class:`ZooError` for a damaged one."""
+        missing = []
+        path = self.role_dir(role) / buffer_name(REPLAY_BUFFER, tag)
+        state = self.role_dir(role) / buffer_name(BELIEF_STATE, tag)
+        try:
+            if path.is_file():
+                model.load_replay_buffer(path)
+            else:
+                missing.append(path.name)
+            if belief_fit is not None:
+                if state.is_file():
+                    import torch
 
-            belief_fit.load_state_dict(torch.load(state, weights_only=False))
+                    belief_fit.load_state_dict(torch.load(state, weights_only=False))
+                else:
+                    missing.append(state.name)
+        except Exception as exc:  # a truncated pickle, another buffer size: many kinds
+            raise ZooError(f"cannot load the buffers of {self.name}/{role} ({type(exc).__name__}: {exc}); "
+                           "delete them to resume with empty buffers") from None
+        return missing
+
+
+def buffer_name(name: str, tag: str) -> str:
+    """``replay_buffer.pkl`` with ``tag`` ``-r003`` → ``replay_buffer-r003.pkl``."""
+    stem, dot, suffix = name.partition(".")
+    return f"{stem}{tag}{dot}{suffix}"
 
 
 @dataclass
@@ -255,7 +274,8 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
     """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
 
     Ratings of different tournaments sit on different scales, so only one tournament is used.
-    Keys are resolved checkpoint paths, and policy strings for players that are not files.
+    Keys are resolved checkpoint paths, and ``role:spec`` for players that are not files (a policy
+    string such as ``random-walk`` can play both roles).
     """
     for results in sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime, reverse=True):
         try:
@@ -273,7 +293,7 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
             if spec.suffix == ".zip":
                 path = spec if spec.is_absolute() else results.parent / spec
                 found[str(path.resolve())] = {**rating, "spec": str(path), "results": str(results)}
-            else:  # a built-in or module:Class player, keyed by its policy string
-                found[rating["spec"]] = {**rating, "results": str(results)}
+            else:  # a built-in, family or module:Class player, keyed by role and policy string
+                found[f"{rating.get('role')}:{rating['spec']}"] = {**rating, "results": str(results)}
         return found
     return {}

@@ -162,7 +162,7 @@ def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path,
     for role in ("pursuer", "evader"):
         for r in (1, 2):
             assert (run / role / f"round-00{r}.zip").is_file()
-        assert (run / role / "replay_buffer.pkl").is_file()
+        assert (run / role / "replay_buffer-r002.pkl").is_file()
     assert len(lines) == 2 and lines[0].startswith("round 1/2: pursuer captures")
     p1, e1, p2 = (read_metadata(run / path) for path in ("pursuer/round-001.zip", "evader/round-001.zip",
                                                          "pursuer/round-002.zip"))
@@ -171,6 +171,7 @@ def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path,
     assert [o["name"] for o in e1.opponents] == ["pure-pursuit", "random-walk", "pursuer-r001"]  # already the new one
     assert [o["name"] for o in p2.opponents][-1] == "evader-r001"
     assert sum(o["episodes"] for o in p1.opponents) == p1.episodes > 0
+    assert p2.episodes == p1.episodes + sum(o["episodes"] for o in p2.opponents)  # cumulative, like steps
     assert p2.steps == 2 * p1.steps == 2 * 240  # one learner for the whole run
     assert p1.opponent == "selfplay:pfsp"
     state = read_state(type("R", (), {"path": run, "name": "sp"})())
@@ -187,35 +188,48 @@ BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8
          "belief_settings.warmup": 40, "belief_settings.batch_size": 16, "belief_settings.update_every": 2}
 
 
-@pytest.mark.parametrize("belief", ["none", "bimdn"])
+@pytest.mark.parametrize("case", ["mid-curriculum", "bimdn", "commit-window"])
 def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
-    quick: Scenario, finished: tuple[Path, list[str]], tmp_path: Path, monkeypatch, belief: str
+    quick: Scenario, tmp_path: Path, monkeypatch, case: str
 ) -> None:
-    settings = BIMDN if belief == "bimdn" else {}
-    if belief == "none":
-        reference = finished[0]
+    """Stopped while the evader trains in round 2 (the curriculum still running, or a learned belief),
+    or after the pursuer's round-2 checkpoint was written but before the state named it."""
+    settings = {"curriculum.fraction": 1.0, **(BIMDN if case == "bimdn" else {})}
+    SelfPlay(job(quick, tmp_path / "ref", "sp", **settings)).run()
+    reference = tmp_path / "ref" / "sp"
+    if case == "bimdn":
+        assert (reference / "evader" / "belief_fit-r002.pt").is_file()
+    assert not (reference / "evader" / "replay_buffer-r001.pkl").exists()  # superseded buffers are deleted
+
+    if case == "commit-window":
+        original_save = SelfPlay._save_state
+
+        def stop_before_commit(self: SelfPlay) -> None:
+            if len(self.state.turns) == 3:  # (2, pursuer) is written but not yet committed
+                raise KeyboardInterrupt
+            original_save(self)
+
+        monkeypatch.setattr(SelfPlay, "_save_state", stop_before_commit)
+        expected = (2, "pursuer")
     else:
-        SelfPlay(job(quick, tmp_path / "ref", "sp", **settings)).run()
-        reference = tmp_path / "ref" / "sp"
-        assert (reference / "evader" / "belief_fit.pt").is_file()
-    original = selfplay_module.PoolTracker
-    started: list[str] = []
+        started: list[str] = []
 
-    class Interrupting(original):
-        def _on_step(self) -> bool:
-            if self.pool.role == "pursuer" and started.count("evader") == 2 and self.num_timesteps > 300:
-                raise KeyboardInterrupt  # round 2, while the evader trains
-            return super()._on_step()
+        class Interrupting(selfplay_module.PoolTracker):
+            def _on_step(self) -> bool:
+                if self.pool.role == "pursuer" and started.count("evader") == 2 and self.num_timesteps > 300:
+                    raise KeyboardInterrupt  # round 2, while the evader trains
+                return super()._on_step()
 
-        def _on_training_start(self) -> None:
-            started.append("evader" if self.pool.role == "pursuer" else "pursuer")
+            def _on_training_start(self) -> None:
+                started.append("evader" if self.pool.role == "pursuer" else "pursuer")
 
-    monkeypatch.setattr(selfplay_module, "PoolTracker", Interrupting)
+        monkeypatch.setattr(selfplay_module, "PoolTracker", Interrupting)
+        expected = (2, "evader")
     with pytest.raises(SelfPlayInterrupted) as stop:
         SelfPlay(job(quick, tmp_path, "sp", **settings)).run()
-    assert (stop.value.round, stop.value.role) == (2, "evader")
+    assert (stop.value.round, stop.value.role) == expected
     assert not (tmp_path / "sp" / "evader" / "round-002.zip").exists()
-    monkeypatch.setattr(selfplay_module, "PoolTracker", original)
+    monkeypatch.undo()
 
     resumed = job(quick, tmp_path, "sp", **settings)
     resumed.resume = True
@@ -224,14 +238,40 @@ def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
         assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip"))
 
 
-def test_the_curriculum_spans_the_first_rounds(quick: Scenario, tmp_path: Path) -> None:
-    fovs: list[float] = []
+def test_pfsp_priors_come_from_the_zoos_tournament_by_role(finished: tuple[Path, list[str]]) -> None:
+    run, _ = finished
+    resumed = SelfPlayJob(read_config(run), run.parent, run.name, seed=1, resume=True, progress=False)
+    loop = SelfPlay(resumed)
+    ratings = [
+        {"name": "p2", "role": "pursuer", "spec": str(run / "pursuer" / "round-002.zip"), "elo": 1600.0, "stderr": 1},
+        {"name": "rw", "role": "evader", "spec": "random-walk", "elo": 1200.0, "stderr": 1},  # the evader random-walk
+        {"name": "g", "role": "evader", "spec": "greedy", "elo": 1800.0, "stderr": 1},
+    ]
+    (run.parent / "tournament").mkdir(exist_ok=True)
+    (run.parent / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
+    priors = loop._priors("pursuer")
+    assert priors["greedy"] == pytest.approx(predicted_win_rate(1800, 1600)) and priors["greedy"] > 0.5
+    assert priors["random-walk"] == pytest.approx(predicted_win_rate(1200, 1600))
+    assert "random-walk" not in loop._priors("evader")  # a pursuer random-walk was never rated
+    (run.parent / "tournament" / "results.json").unlink()
+
+
+def read_config(run: Path) -> Scenario:
+    from pecli.zoo import Run
+
+    return Run(run).scenario()
+
+
+def test_the_curriculum_spans_the_first_rounds_for_both_learners(quick: Scenario, tmp_path: Path) -> None:
+    knobs: list[tuple[float, ...]] = []
     loop = SelfPlay(job(quick, tmp_path, "sp", **{"curriculum.fraction": 1.0}))
-    loop.report = lambda line: fovs.append(loop.learners["pursuer"].env.core.game.fov["pursuer"])
+    games = lambda: [loop.learners[role].env.core.game for role in ("pursuer", "evader")]  # noqa: E731
+    loop.report = lambda line: knobs.append(tuple(x for g in games() for x in (g.fov["pursuer"], g.speed_scale["evader"])))
     loop.run()
     final = quick.pursuer.sensor.fov
-    assert math.isclose(fovs[0], 2 * math.pi + (final - 2 * math.pi) * 0.5, rel_tol=0.02)  # halfway after round 1
-    assert math.isclose(fovs[1], final)
+    half = 2 * math.pi + (final - 2 * math.pi) * 0.5
+    assert knobs[0] == pytest.approx((half, 0.5, half, 0.5), rel=0.02)  # halfway after round 1, in both games
+    assert knobs[1] == pytest.approx((final, 1.0, final, 1.0))
 
 
 # -- the command -------------------------------------------------------------------------------

@@ -77,6 +77,9 @@ def selfplay(
         changed = sorted(key for key, value in settings.items() if key != "selfplay.rounds" and _get(current, key) != value)
         if changed:
             raise PecliError(f"only --rounds can change when resuming (not {', '.join(changed)})")
+        played = max((t.round for t in state.turns), default=0)
+        if rounds is not None and rounds < played:
+            raise PecliError(f"run '{name}' has played {played} rounds already: --rounds must be at least that")
         seed = state.seed
     else:
         scenario = load_scenario(config)
@@ -100,7 +103,7 @@ def selfplay(
     try:
         loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
         err_console.print(
-            f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} rounds of {sp.steps_per_round:,} steps per side "
+            f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side "
             f"on {scenario.name}, opponents {sp.opponents}, belief {scenario.training.belief}", highlight=False)
         final = loop.run()
     except SelfPlayInterrupted as stop:

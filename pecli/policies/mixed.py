@@ -79,6 +79,10 @@ class MixedPolicy:
         self.assignment[mask] = drawn
         for k in np.unique(drawn):
             self.members[k].reset(n, mask=mask & (self.assignment == k))
+        for k, member in enumerate(self.members):  # learned members decide only for their own games
+            end = getattr(member, "end", None)
+            if end is not None:
+                end(self.assignment != k)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs)

@@ -32,13 +32,18 @@ class CurriculumCallback(BaseCallback):
         self.final_fov = scenario.pursuer.sensor.fov
         self.span = max(1.0, fraction * total_steps)
 
-    def progress(self) -> float:
-        return min(1.0, self.num_timesteps / self.span)
+    def progress(self, steps: int | None = None) -> float:
+        return min(1.0, (self.num_timesteps if steps is None else steps) / self.span)
+
+    def apply_to(self, env: Any, steps: int) -> float:
+        """Set ``env``'s knobs for ``steps`` learner transitions; returns the progress. Call it before
+        ``learn`` too: SB3 resets the env before any callback runs, and those first games count."""
+        p = self.progress(steps)
+        env.env_method("set_curriculum", 2 * math.pi + (self.final_fov - 2 * math.pi) * p, p)
+        return p
 
     def _apply(self) -> None:
-        p = self.progress()
-        fov = 2 * math.pi + (self.final_fov - 2 * math.pi) * p
-        self.training_env.env_method("set_curriculum", fov, p)
+        p = self.apply_to(self.training_env, self.num_timesteps)
         self.logger.record("curriculum/progress", p)
 
     def _on_training_start(self) -> None:

@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from pecli.roles import Role
+from pecli.stats import ELO_SCALE
 
 STRATEGIES = ("latest", "uniform", "pfsp")
-ELO_PER_LOGIT = 173.7  # pecli.stats.bradley_terry reports 1500 + 173.7 * strength
-MIN_SHARE = 0.02  # (ours) pfsp never starves an entry completely: each gets >= 2 % / entries
+MIN_SHARE = 0.02  # (ours) pfsp never starves an entry: each keeps >= 2 % of a uniform draw's share
 
 
 @dataclass
@@ -109,4 +109,4 @@ class OpponentPool:
 
 def predicted_win_rate(entry_elo: float, learner_elo: float) -> float:
     """P(entry beats learner) from Bradley–Terry ratings in pecli's Elo points."""
-    return 1.0 / (1.0 + math.exp(-(entry_elo - learner_elo) / ELO_PER_LOGIT))
+    return 1.0 / (1.0 + math.exp(-(entry_elo - learner_elo) / ELO_SCALE))

@@ -12,12 +12,12 @@ A run in the zoo::
         config.yaml, command.txt, versions.json, tb/     as for ``pecli train``
         selfplay.json                the state: pools and their records, finished turns, seeds
         pursuer/round-001.zip/.json  the pursuer after round 1, with its lineage in the metadata
-        pursuer/replay_buffer.pkl    the pursuer's replay buffer after its last finished turn
-        pursuer/belief_fit.pt        with a learned belief: its own buffer and optimiser
+        pursuer/replay_buffer-r003.pkl  the pursuer's replay buffer after its last finished turn (round 3)
+        pursuer/belief_fit-r003.pt   with a learned belief: its own buffer and optimiser
         evader/...
 
-``selfplay.json`` is written after a turn's checkpoint and buffer, so it always names finished
-work: an interrupted run resumes at the turn it was in.
+``selfplay.json`` is written after a turn's checkpoint and buffers, and names them: it is the
+commit point, so an interrupted run resumes at the turn it was in, from files of finished turns.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.zoo import Run, tournament_ratings
+from pecli.zoo import BELIEF_STATE, REPLAY_BUFFER, Run, buffer_name, tournament_ratings
 
 STATE_FILE = "selfplay.json"
 
@@ -83,6 +83,7 @@ class Turn:
     cpu_seconds: float
     checkpoint: str  # run-relative
     opponents: int  # entries in the opponents' pool during the turn
+    buffers: str = ""  # tag of the learner's buffer files after the turn (``replay_buffer<tag>.pkl``)
 
     @property
     def capture_rate(self) -> float:
@@ -140,17 +141,17 @@ def turn_seed(seed: int, round: int, role: Role) -> int:
 
 
 def checkpoint_name(round: int) -> str:
+    """The name of a learner's checkpoint after ``round``: ``round-003``."""
     return f"round-{round:03d}"
 
 
 def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
-    """Pools holding the baselines of each role (or empty, with ``selfplay.baselines: false``)."""
+    """Pools holding the baselines of each role: generation 0."""
     sp = scenario.training.selfplay
     pools = {role: OpponentPool(role) for role in ROLES}
-    if sp.baselines:
-        for role in ROLES:
-            for name in builtin_names(role):
-                pools[role].add(name, name, generation=0)
+    for role in ROLES:
+        for name in builtin_names(role):
+            pools[role].add(name, name, generation=0)
     return SelfPlayState(seed=seed, curriculum_steps=sp.rounds * sp.steps_per_round, pools=pools)
 
 
@@ -158,6 +159,7 @@ class Learner:
     """One side of self-play: its SB3 model, its batched view and the callbacks that outlive a turn."""
 
     def __init__(self, job: SelfPlayJob, role: Role, placeholder: Policy, run: Run, state: SelfPlayState) -> None:
+        """Build the learner of ``role`` afresh, or from its newest round checkpoint and buffers when it has one."""
         self.role = role
         self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
                                   seed=job.seed)
@@ -183,8 +185,9 @@ class Learner:
             if belief.learned and self.env.buffer is not None:
                 self.fit = FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half)
                 self.callbacks.append(self.fit)
+        self.missing: list[str] = []
         if latest is not None:
-            run.load_replay_buffer(self.model, role, self.fit)
+            self.missing = run.load_replay_buffer(self.model, role, self.fit, tag=latest.buffers)
 
 
 class SelfPlay:
@@ -222,24 +225,25 @@ class SelfPlay:
     def _mixed(self, role: Role) -> MixedPolicy:
         pool = self.state.pools[role]
         if not pool.entries:
-            raise PecliError(f"the {role} pool is empty: enable selfplay.baselines or resume a run that has one")
+            raise PecliError(f"the {role} pool of run '{self.run_dir.name}' is empty (damaged {STATE_FILE}?)")
         members = [self._policy(role, e.spec) for e in pool.entries]
         return MixedPolicy(role, members, [e.name for e in pool.entries])
 
     def _priors(self, learner: Role) -> dict[str, float]:
         """PFSP priors: each entry's predicted win rate against the learner's latest checkpoint, from the
-        newest tournament under the zoo that rated both."""
+        newest tournament under the zoo, when it rated both."""
         latest = self.state.latest(learner)
-        if latest is None:
+        if latest is None or self.settings.opponents != "pfsp":
             return {}
         ratings = tournament_ratings(self.job.zoo)
         mine = ratings.get(str((self.run_dir.path / latest.checkpoint).resolve()))
-        if mine is None:
+        if mine is None or mine.get("role") != learner:
             return {}
+        other = opponent_of(learner)
         priors = {}
-        for e in self.state.pools[opponent_of(learner)].entries:
-            key = str((self.run_dir.path / e.spec).resolve()) if e.spec.endswith(".zip") else e.spec
-            if key in ratings:
+        for e in self.state.pools[other].entries:
+            key = str((self.run_dir.path / e.spec).resolve()) if e.spec.endswith(".zip") else f"{other}:{e.spec}"
+            if key in ratings and ratings[key].get("role") == other:
                 priors[e.name] = predicted_win_rate(ratings[key]["elo"], mine["elo"])
         return priors
 
@@ -251,7 +255,10 @@ class SelfPlay:
     def run(self) -> dict[Role, Path]:
         th.set_num_threads(self.scenario.training.torch_threads)
         for role in ROLES:
-            self.learners[role] = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
+            learner = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
+            if learner.missing:
+                self.report(f"warning: {role} resumes with empty buffers ({', '.join(learner.missing)} not found)")
+            self.learners[role] = learner
         for r in range(1, self.settings.rounds + 1):
             if all(self.state.done(r, role) for role in ROLES):
                 continue
@@ -272,6 +279,9 @@ class SelfPlay:
         mixed.weights = weigh(pool)
         model = learner.model
         learner.env.env_method("set_opponent", mixed)
+        for callback in learner.callbacks:  # the games SB3 starts before any callback runs count too
+            if isinstance(callback, CurriculumCallback):
+                callback.apply_to(learner.env, model.num_timesteps)
         model.set_env(learner.env, force_reset=True)  # every game starts afresh against the new pool
         model.set_random_seed(turn_seed(self.state.seed, r, role))
 
@@ -280,21 +290,23 @@ class SelfPlay:
         display = RoundDisplay(tracker, sp.steps_per_round, title, enabled=self.job.progress)
         cpu = time.process_time()
         try:
-            model.learn(sp.steps_per_round, callback=CallbackList([*learner.callbacks, tracker, display]),
-                        reset_num_timesteps=False, tb_log_name=role)
+            try:
+                model.learn(sp.steps_per_round, callback=CallbackList([*learner.callbacks, tracker, display]),
+                            reset_num_timesteps=False, tb_log_name=role)
+            finally:
+                display.close()
+                logger = getattr(model, "_logger", None)
+                if logger is not None:
+                    logger.close()
+            self._finish_turn(r, role, tracker, time.process_time() - cpu)
         except KeyboardInterrupt:
             raise SelfPlayInterrupted(r, role) from None
-        finally:
-            display.close()
-            logger = getattr(model, "_logger", None)
-            if logger is not None:
-                logger.close()
-        self._finish_turn(r, role, tracker, time.process_time() - cpu)
 
     def _finish_turn(self, r: int, role: Role, tracker: PoolTracker, cpu_seconds: float) -> None:
         learner, other = self.learners[role], opponent_of(role)
         previous = self.state.latest(role)
-        meta = checkpoint_meta(learner.train_job, learner.model, tracker.episodes)
+        episodes = sum(t.episodes for t in self.state.turns if t.role == role) + tracker.episodes
+        meta = checkpoint_meta(learner.train_job, learner.model, episodes)
         meta.opponent = f"selfplay:{self.settings.opponents}"
         meta.round = r
         meta.parent = previous.checkpoint if previous else ""
@@ -304,18 +316,25 @@ class SelfPlay:
              "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
             for e in self.state.pools[other].entries
         ]
+        # the checkpoint and buffers under this turn's names, then selfplay.json naming them: the one
+        # commit point. A stop before it leaves the previous turn's files, which the state still names.
         path = self.run_dir.save(learner.model, role, checkpoint_name(r), meta)
-        self.run_dir.save_replay_buffer(learner.model, role, learner.fit)
+        tag = f"-r{r:03d}"
+        self.run_dir.save_replay_buffer(learner.model, role, learner.fit, tag=tag)
         relative = str(path.relative_to(self.run_dir.path))
         self.state.pools[role].add(f"{role}-r{r:03d}", relative, generation=r)
         self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), tracker.episodes, tracker.captures,
-                                     round(cpu_seconds, 2), relative, len(tracker.opponent.names)))
+                                     round(cpu_seconds, 2), relative, len(tracker.opponent.names), tag))
         self._save_state()
+        if previous is not None and previous.buffers != tag:
+            for name in (REPLAY_BUFFER, BELIEF_STATE):
+                (self.run_dir.role_dir(role) / buffer_name(name, previous.buffers)).unlink(missing_ok=True)
 
     def _save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())
 
     def _summary(self, r: int) -> str:
+        """The line printed after round ``r``."""
         parts = []
         for role in ROLES:
             turn = next(t for t in self.state.turns if t.round == r and t.role == role)

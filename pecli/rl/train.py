@@ -247,7 +247,9 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
-        callbacks.insert(0, CurriculumCallback(job.scenario, schedule, t.curriculum.fraction))
+        curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)
+        curriculum.apply_to(env, model.num_timesteps)  # the games SB3 starts before any callback runs
+        callbacks.insert(0, curriculum)
     fit = None
     if belief is not None and belief.learned and env.buffer is not None:
         fit = FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half)

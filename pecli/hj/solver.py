@@ -34,6 +34,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy import sparse
 
+from pecli.errors import ConfigError
 from pecli.hj.filters import window_extreme
 from pecli.hj.grid import Grid
 from pecli.hj.problem import Problem
@@ -145,11 +146,18 @@ class Iteration:
         np.minimum(values, self.target, out=values)
 
 
+MAX_NODES = 400_000_000  # (ours) about 5 float32 copies of the grid fit in 8 GB
+
+
 def solve(problem: Problem, on_step: Callable[[int, int], None] | None = None) -> np.ndarray:
     """The value after ``problem.steps`` iterations, float32, shape ``problem.grid.shape``.
 
     ``on_step(done, total)`` is called after every iteration (for progress bars).
     """
+    nodes = int(np.prod(problem.grid.shape))
+    if nodes > MAX_NODES:
+        raise ConfigError(f"the grid {problem.grid.describe()} has {nodes:,} nodes; the solver keeps several "
+                          f"float32 copies, so at most {MAX_NODES:,} (about 8 GB) are allowed: use a coarser --grid")
     step = Iteration(problem)
     values = capture_target(problem.grid, problem.game.capture_distance)
     for k in range(problem.steps):

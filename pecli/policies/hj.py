@@ -38,6 +38,14 @@ from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario
 
 FLAT_GRADIENT = 1e-3  # s: |dV/dv| below this on both axes counts as no gradient
+DEAD_BAND = 0.0  # share of the larger |dV/dv| below which an axis gets no input; a 5 % band was tried
+                 # and made the HJ evader much weaker (docs/hj.md), so only an exact zero gets none
+
+
+def bang_bang(drive: np.ndarray) -> np.ndarray:
+    """Full input ``sign(drive)`` ``(n, 2)`` on each axis, except axes at or under :data:`DEAD_BAND` of the larger one."""
+    larger = np.max(np.abs(drive), axis=1, keepdims=True)
+    return np.where(np.abs(drive) > DEAD_BAND * larger, np.sign(drive), 0.0)
 
 
 class HJPolicy(HeuristicPolicy):
@@ -105,10 +113,14 @@ class HJPolicy(HeuristicPolicy):
     # ------------------------------------------------------------------ acting
     def _act(self, view: Decoded) -> np.ndarray:
         opp_pos, opp_vel = self._estimate(view)
+        # The input changes the velocity after this step's move: V(r, w) = opt V(r + w dt, w + dw), so the
+        # value's velocity gradient is read where the positions will be after the move.
+        dt = self.scenario.dt
+        own_next, opp_next = view.own_pos + dt * view.own_vel, opp_pos + dt * opp_vel
         if self.role == "pursuer":
-            points = self.grid.points(view.own_pos, view.own_vel, opp_pos, opp_vel)
+            points = self.grid.points(own_next, view.own_vel, opp_next, opp_vel)
         else:
-            points = self.grid.points(opp_pos, opp_vel, view.own_pos, view.own_vel)
+            points = self.grid.points(opp_next, opp_vel, own_next, view.own_vel)
         return self.inputs(points)
 
     def inputs(self, points: np.ndarray) -> np.ndarray:
@@ -118,7 +130,7 @@ class HJPolicy(HeuristicPolicy):
         drive = self.a_goal * self.velocity_sign * gradient[:, :2]
         flat = np.max(np.abs(drive), axis=1) <= FLAT_GRADIENT
         drive[flat] = self.a_goal * self.position_sign * gradient[flat, 2:]
-        return np.sign(drive)
+        return bang_bang(drive)
 
     def _estimate(self, view: Decoded) -> tuple[np.ndarray, np.ndarray]:
         """The opponent's position and velocity ``(n, 2)`` each: observed, or estimated where unseen."""

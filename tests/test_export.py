@@ -32,6 +32,7 @@ from pecli.game.si import SILayout
 from pecli.policies import resolve_policy
 from pecli.policies.exported import ExportedPolicy
 from pecli.roles import Role, opponent_of
+from pecli.rl.belief import BeliefVecEnv
 from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.runtime import Controller, ExportedModel, sidecar_path
 from pecli.scenario import Scenario
@@ -47,12 +48,16 @@ TINY = {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch":
 
 
 def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pursuer") -> Path:
-    """An untrained tiny checkpoint in a zoo run (parity needs no good policy)."""
-    scenario = with_overrides(scenario, {**TINY, "belief": belief})
+    """A tiny checkpoint in a zoo run, trained for a few gradient steps (parity needs no good policy,
+    but trained weights are less regular than initial ones)."""
+    scenario = with_overrides(scenario, {**TINY, "belief": belief, "n_envs": 4})
     name = f"{belief}-{role}"
     job = TrainJob(role=role, scenario=scenario, opponent=DEFAULT_OPPONENT[role], zoo=zoo, name=name)
     env = make_env(job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0)
     model = make_model(job, env, tensorboard=None)
+    if isinstance(env, BeliefVecEnv):
+        env.set_belief(model.policy.actor.features_extractor.belief)
+    model.learn(80)  # 50 transitions of warm-up, then a few updates
     return Run.create(zoo, name, scenario).save(model, role, "final", checkpoint_meta(job, model, 0))
 
 

@@ -57,7 +57,7 @@ def selfplay(
     [bold]training.selfplay[/] section.
     """
     from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
-    from pecli.rl.train import parse_overrides, with_overrides
+    from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
 
     settings = parse_overrides(overrides or [])
@@ -90,7 +90,7 @@ def selfplay(
     job = SelfPlayJob(
         scenario=scenario,
         zoo=zoo,
-        name=name or f"{scenario.name}-selfplay-s{seed}-{_stamp()}",
+        name=name or default_run_name("selfplay", scenario, seed),
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
@@ -123,8 +123,3 @@ def _get(data: dict, dotted: str) -> object:
         data = data[part]
     return data
 
-
-def _stamp() -> str:
-    import time
-
-    return time.strftime("%Y%m%d-%H%M%S")

@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -176,8 +176,10 @@ class Learner:
             except Exception as exc:  # a damaged zip: SB3 raises many kinds
                 raise PecliError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
         self.callbacks: list[Any] = []
+        self.curriculum: CurriculumCallback | None = None
         if t.curriculum.enabled:
-            self.callbacks.append(CurriculumCallback(job.scenario, state.curriculum_steps, t.curriculum.fraction))
+            self.curriculum = CurriculumCallback(job.scenario, state.curriculum_steps, t.curriculum.fraction)
+            self.callbacks.append(self.curriculum)
         self.fit: FitBelief | None = None
         if isinstance(self.env, BeliefVecEnv):
             belief = self.model.policy.actor.features_extractor.belief
@@ -279,9 +281,8 @@ class SelfPlay:
         mixed.weights = weigh(pool)
         model = learner.model
         learner.env.env_method("set_opponent", mixed)
-        for callback in learner.callbacks:  # the games SB3 starts before any callback runs count too
-            if isinstance(callback, CurriculumCallback):
-                callback.apply_to(learner.env, model.num_timesteps)
+        if learner.curriculum is not None:  # the games SB3 starts before any callback runs count too
+            learner.curriculum.apply_to(learner.env, model.num_timesteps)
         model.set_env(learner.env, force_reset=True)  # every game starts afresh against the new pool
         model.set_random_seed(turn_seed(self.state.seed, r, role))
 
@@ -306,16 +307,18 @@ class SelfPlay:
         learner, other = self.learners[role], opponent_of(role)
         previous = self.state.latest(role)
         episodes = sum(t.episodes for t in self.state.turns if t.role == role) + tracker.episodes
-        meta = checkpoint_meta(learner.train_job, learner.model, episodes)
-        meta.opponent = f"selfplay:{self.settings.opponents}"
-        meta.round = r
-        meta.parent = previous.checkpoint if previous else ""
         weights = dict(zip(tracker.opponent.names, tracker.opponent.weights))
-        meta.opponents = [
-            {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
-             "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
-            for e in self.state.pools[other].entries
-        ]
+        meta = replace(
+            checkpoint_meta(learner.train_job, learner.model, episodes),
+            opponent=f"selfplay:{self.settings.opponents}",
+            round=r,
+            parent=previous.checkpoint if previous else "",
+            opponents=[
+                {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
+                 "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
+                for e in self.state.pools[other].entries
+            ],
+        )
         # the checkpoint and buffers under this turn's names, then selfplay.json naming them: the one
         # commit point. A stop before it leaves the previous turn's files, which the state still names.
         path = self.run_dir.save(learner.model, role, checkpoint_name(r), meta)

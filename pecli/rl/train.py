@@ -282,6 +282,6 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     return run.save(model, job.role, FINAL, checkpoint_meta(job, model, stats.episodes))
 
 
-def default_run_name(role: Role, scenario: Scenario, seed: int) -> str:
-    """``<scenario>-<role>-s<seed>-<yyyymmdd-hhmmss>``."""
-    return f"{scenario.name}-{role}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+def default_run_name(what: str, scenario: Scenario, seed: int) -> str:
+    """``<scenario>-<what>-s<seed>-<yyyymmdd-hhmmss>``, ``what`` a role or ``selfplay``."""
+    return f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -9,10 +9,12 @@ transitions, with learning and belief fitting both active (warm-ups shortened), 
 on one torch thread, median of ``--repeats``.
 
 (b) collects history windows of a pure-pursuit pursuer against the random-walk, greedy and rash
-evaders, fits the BiMDN and the image belief on them by NLL (paper settings: batch 256, Adam
-0.002), then measures, on held-out games with other seeds, the mean distance (m) between each
-belief's mean and the evader's true position at the moments the pursuer does not see it: BiMDN,
-UKF, image, and "last seen" (the last sighting in the window; the arena's centre if none).
+evaders (``--games`` per evader), fits the BiMDN and the image belief on them by NLL (paper
+settings: batch 256, Adam 0.002), keeping the state with the best NLL on validation games, then
+measures, on held-out games with other seeds, the mean distance (m) between each belief's mean
+and the evader's true position at the moments the pursuer does not see it: BiMDN, UKF, image,
+"last seen" (the last sighting in the window; the arena's centre if none) and the centre itself,
+over all unseen moments and split by whether the window holds a sighting.
 
 (c) reads the curve runs of ``bench_train.py curves --belief KIND`` and, for each, takes the
 newest checkpoint the run had written within ``--minutes`` of CPU time (the run's evaluation log
@@ -77,7 +79,6 @@ def _windows(scenario, evaders: list[str], games: int, seed: int):
     from pecli.policies import resolve_policy
 
     histories, targets, unseen = [], [], []
-    codec_seen = None
     for k, name in enumerate(evaders):
         game = Game(scenario, n=games, seed=seed + k)
         obs = game.reset(seed=seed + k)
@@ -85,9 +86,10 @@ def _windows(scenario, evaders: list[str], games: int, seed: int):
         evader = resolve_policy(name, "evader", scenario, seed=seed + 100 + k)
         pursuer.reset(games)
         evader.reset(games)
-        window = HistoryWindow(games, game.obs_dim["pursuer"])
+        t = scenario.training
+        window = HistoryWindow(games, game.obs_dim["pursuer"], t.history_length, t.history_stride)
         window.reset(obs["pursuer"])
-        codec_seen = game.codecs["pursuer"].seen_index
+        seen_index = game.codecs["pursuer"].seen_index
         for step in range(1, scenario.horizon + 1):
             obs = game.step(pursuer.act(obs["pursuer"]), evader.act(obs["evader"])).obs
             window.push(obs["pursuer"])
@@ -95,17 +97,54 @@ def _windows(scenario, evaders: list[str], games: int, seed: int):
                 live = ~game.finished
                 histories.append(window.get()[live])
                 targets.append(game.normalised_state()[live, 5:7])
-                unseen.append(obs["pursuer"][live, codec_seen] < 0)
+                unseen.append(obs["pursuer"][live, seen_index] < 0)
     return np.concatenate(histories), np.concatenate(targets), np.concatenate(unseen)
 
 
-def _last_seen(decoder, history: np.ndarray) -> np.ndarray:
+def _last_seen(decoder, history: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The last sighting in each window (the arena's centre if none), and whether there was one."""
     window = decoder(history)
     out = np.zeros((history.shape[0], 2))
     for t in range(window.seen.shape[1]):  # later sightings overwrite earlier ones
         seen = window.seen[:, t] & window.valid[:, t]
         out[seen] = window.opp_pos[seen, t]
-    return out
+    return out, (window.seen & window.valid).any(axis=1)
+
+
+def _mean(model, history: np.ndarray) -> np.ndarray:
+    with th.no_grad():
+        return np.concatenate([model.mixture(th.as_tensor(history[i:i + 2048])).mean().numpy()
+                               for i in range(0, len(history), 2048)])
+
+
+def _nll(model, history: np.ndarray, target: np.ndarray) -> float:
+    with th.no_grad():
+        return float(np.mean([model.mixture(th.as_tensor(history[i:i + 2048])).nll(th.as_tensor(target[i:i + 2048])).item()
+                              for i in range(0, len(history), 2048)]))
+
+
+def _fit(model, data, validation, settings, updates: int, check_every: int) -> tuple[int, float]:
+    """Fits ``model`` by NLL (the paper's batch and learning rate); keeps the state with the best
+    validation NLL, checked every ``check_every`` updates. Returns that update and the seconds spent."""
+    import copy
+
+    optimiser = th.optim.Adam(model.parameters(), lr=settings.learning_rate)
+    rng = np.random.default_rng(0)
+    best = (_nll(model, *validation), 0, copy.deepcopy(model.state_dict()))
+    start = time.perf_counter()
+    for update in range(1, updates + 1):
+        index = rng.integers(0, len(data[0]), settings.batch_size)
+        loss = model.mixture(th.as_tensor(data[0][index])).nll(th.as_tensor(data[1][index]))
+        optimiser.zero_grad()
+        loss.backward()
+        th.nn.utils.clip_grad_norm_(model.parameters(), settings.max_grad_norm)
+        optimiser.step()
+        if update % check_every == 0:
+            score = _nll(model, *validation)
+            if score < best[0]:
+                best = (score, update, copy.deepcopy(model.state_dict()))
+    model.load_state_dict(best[2])
+    return best[1], time.perf_counter() - start
 
 
 def quality(args: argparse.Namespace) -> None:
@@ -116,39 +155,33 @@ def quality(args: argparse.Namespace) -> None:
     scenario = load_scenario(args.config)
     evaders = ["random-walk", "greedy", "rash"]
     train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
-    test_x, test_y, test_unseen = _windows(scenario, evaders, args.games // 2, seed=1000)
+    valid_x, valid_y, _ = _windows(scenario, evaders, max(args.games // 10, 10), seed=500)
+    test_x, test_y, test_unseen = _windows(scenario, evaders, args.test_games, seed=1000)
     half = np.array(scenario.arena.half)
     settings = scenario.training.belief_settings
-    kwargs = {"window": (20, test_x.shape[1] // 20), "scenario": scenario.model_dump(mode="json"), "role": "pursuer"}
-    errors: dict[str, float] = {}
+    t = scenario.training
+    samples = -(-t.history_length // t.history_stride)
+    kwargs = {"window": (samples, test_x.shape[1] // samples), "scenario": scenario.model_dump(mode="json"),
+              "role": "pursuer"}
+    decoder = BeliefModel("ukf", **kwargs).decoder
+    last, sighted = _last_seen(decoder, test_x)
+    means: dict[str, np.ndarray] = {"last seen": last, "centre": np.zeros_like(last)}
     for kind in ("bimdn", "image", "ukf"):
         model = BeliefModel(kind, **kwargs)
-        fit_seconds = 0.0
         if model.learned:
-            optimiser = th.optim.Adam(model.parameters(), lr=settings.learning_rate)
-            rng = np.random.default_rng(0)
-            start = time.perf_counter()
-            for _ in range(args.updates):
-                index = rng.integers(0, len(train_x), settings.batch_size)
-                loss = model.mixture(th.as_tensor(train_x[index])).nll(th.as_tensor(train_y[index]))
-                optimiser.zero_grad()
-                loss.backward()
-                th.nn.utils.clip_grad_norm_(model.parameters(), settings.max_grad_norm)
-                optimiser.step()
-            fit_seconds = time.perf_counter() - start
-        with th.no_grad():
-            mean = np.concatenate([model.mixture(th.as_tensor(test_x[i:i + 2048])).mean().numpy()
-                                   for i in range(0, len(test_x), 2048)])
-        errors[kind] = float((np.linalg.norm((mean - test_y) * half, axis=1))[test_unseen].mean())
-        print(f"{kind}: fitted in {fit_seconds:.0f} s" if model.learned else f"{kind}: no fitting")
-    decoder = BeliefModel("ukf", **kwargs).decoder
-    errors["last seen"] = float(np.linalg.norm((_last_seen(decoder, test_x) - test_y) * half, axis=1)[test_unseen].mean())
-    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {len(train_x)} training windows, "
-          f"{int(test_unseen.sum())} held-out unseen moments; {args.updates} updates of batch {settings.batch_size}")
-    print("| belief | mean unseen-position error (m) |")
-    print("| --- | ---: |")
-    for kind, error in sorted(errors.items(), key=lambda item: item[1]):
-        print(f"| {kind} | {error:.2f} |")
+            best, seconds = _fit(model, (train_x, train_y), (valid_x, valid_y), settings, args.updates, args.check_every)
+            print(f"{kind}: {args.updates} updates in {seconds:.0f} s; kept update {best} (best validation NLL)")
+        means[kind] = _mean(model, test_x)
+    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {len(train_x)} training windows "
+          f"({args.games} games per evader), {int(test_unseen.sum())} held-out unseen moments "
+          f"({args.test_games} other games per evader); up to {args.updates} updates of batch {settings.batch_size}")
+    groups = {"all unseen": test_unseen, "a sighting in the window": test_unseen & sighted,
+              "none in the window": test_unseen & ~sighted}
+    print("| belief | " + " | ".join(f"{name} ({int(mask.sum())})" for name, mask in groups.items()) + " |")
+    print("| --- |" + " ---: |" * len(groups))
+    errors = {kind: np.linalg.norm((mean - test_y) * half, axis=1) for kind, mean in means.items()}
+    for kind, error in sorted(errors.items(), key=lambda item: item[1][test_unseen].mean()):
+        print(f"| {kind} | " + " | ".join(f"{error[mask].mean():.2f}" for mask in groups.values()) + " |")
 
 
 def _checkpoint_within(run: Path, minutes: float) -> tuple[Path, float] | None:
@@ -211,8 +244,10 @@ def main() -> None:
     s.add_argument("--repeats", type=int, default=3)
     q = sub.add_parser("quality")
     q.add_argument("--config", default="paper")
-    q.add_argument("--games", type=int, default=400)
-    q.add_argument("--updates", type=int, default=1500)
+    q.add_argument("--games", type=int, default=2000, help="training games per evader")
+    q.add_argument("--test-games", type=int, default=300, help="held-out games per evader")
+    q.add_argument("--updates", type=int, default=6000)
+    q.add_argument("--check-every", type=int, default=250, help="updates between validation checks")
     c = sub.add_parser("capture")
     c.add_argument("--config", default="paper")
     c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])

@@ -313,3 +313,11 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
         result = runner.invoke(app, bad)
         assert result.exit_code == 1, (bad, result.output)
         assert message in result.output and "Traceback" not in result.output
+
+
+def test_requested_sizes_that_snap_to_one_grid_share_a_cache_key(point_mass: Scenario) -> None:
+    a = Problem.for_scenario(point_mass, "rel4d", sizes=(15, 21))
+    b = Problem.for_scenario(point_mass, "rel4d", sizes=(15, 25))
+    assert a.grid.describe() == b.grid.describe() and a.key() == b.key()
+    assert Problem.for_scenario(point_mass, "rel4d", sizes=(15, 41)).key() != a.key()
+    assert Problem.for_scenario(point_mass, "rel4d", sizes=(17, 21)).key() != a.key()

@@ -83,3 +83,19 @@ def test_rm_asks_and_deletes(zoo: Path, tmp_path: Path) -> None:
     assert deleted.exit_code == 0 and not checkpoint.exists() and not checkpoint.with_suffix(".json").exists()
     assert invoke("zoo", "rm", str(copy / "e"), "--yes").exit_code == 0 and not (copy / "e").exists()
     assert invoke("zoo", "rm", str(tmp_path)).exit_code == 1  # not a run folder
+
+
+def test_play_takes_the_scenario_a_checkpoint_was_trained_on(zoo: Path) -> None:
+    checkpoint = str(zoo / "p" / "pursuer" / "final.zip")
+    result = invoke("play", "-p", checkpoint, "-n", "4")  # no --config: the run's own (quick)
+    assert result.exit_code == 0, result.output
+    assert "on quick" in result.stdout
+    refused = invoke("play", "-p", checkpoint, "-c", "paper", "-n", "4")
+    assert refused.exit_code == 1 and "pass the config it was trained with" in refused.output
+
+
+def test_a_resumed_run_refuses_another_scenario(zoo: Path) -> None:
+    result = invoke("train", "pursuer", "--zoo", str(zoo), "--name", "p", "--resume", "-c", "paper")
+    assert result.exit_code == 1 and "plays scenario 'quick'; a resumed run keeps it" in result.output
+    result = invoke("selfplay", "--zoo", str(zoo), "--name", "p", "--resume", "-c", "paper")
+    assert result.exit_code == 1 and "a resumed run keeps it" in result.output

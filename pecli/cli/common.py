@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
+from pathlib import Path
 from collections.abc import Callable
 from typing import Annotated, Any, TypeVar
 
@@ -13,6 +14,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from pecli.errors import PecliError
+from pecli.scenario import Scenario
 
 console = Console()
 err_console = Console(stderr=True)
@@ -24,6 +26,24 @@ DEBUG_VARIABLE = "PECLI_DEBUG"
 ConfigOption = Annotated[
     str,
     typer.Option("--config", "-c", help="Scenario YAML file, or a built-in name: paper, quick, car_vs_car, point_mass, robots."),
+]
+PlayersConfigOption = Annotated[
+    str | None,
+    typer.Option(
+        "--config",
+        "-c",
+        help="Scenario YAML file or built-in name; default: the scenario a policy file was trained on, else paper.",
+        show_default=False,
+    ),
+]
+TrainConfigOption = Annotated[
+    str | None,
+    typer.Option(
+        "--config",
+        "-c",
+        help="Scenario YAML file or built-in name (default: paper; a resumed run keeps its own).",
+        show_default=False,
+    ),
 ]
 SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Seed: the same seed plays the same games.")]
 
@@ -75,3 +95,33 @@ def require_positive(value: int, name: str) -> int:
     if value < 1:
         raise PecliError(f"{name} must be at least 1, got {value}")
     return value
+
+
+def scenario_for(players: list[str], config: str | None) -> Scenario:
+    """The ``--config`` scenario, else the one the first of ``players`` records (a checkpoint's run, an
+    export's sidecar, the first run folder found under a directory), else the paper's."""
+    from pecli.policies import stored_scenario
+    from pecli.scenario import load_scenario
+    from pecli.zoo import Run
+
+    if config is not None:
+        return load_scenario(config)
+    for player in players:
+        path = Path(player)
+        if path.is_file():
+            if (scenario := stored_scenario(player)) is not None:
+                return scenario
+        elif path.is_dir():
+            runs = [path] if (path / "config.yaml").is_file() else sorted(p.parent for p in path.rglob("config.yaml"))
+            if runs:
+                return Run(runs[0]).scenario()
+    return load_scenario("paper")
+
+
+def resumed_scenario(run_scenario: Scenario, config: str | None, name: str) -> Scenario:
+    """A resumed run's own scenario; :class:`PecliError` if ``--config`` names another game."""
+    from pecli.scenario import load_scenario
+
+    if config is not None and load_scenario(config).fingerprint() != run_scenario.fingerprint():
+        raise PecliError(f"run '{name}' plays scenario '{run_scenario.name}'; a resumed run keeps it (drop --config)")
+    return run_scenario

@@ -11,18 +11,18 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from pecli.cli.common import (
-    ConfigOption,
+    PlayersConfigOption,
     SeedOption,
     console,
     err_console,
     one_torch_thread,
     require_positive,
+    scenario_for,
     user_errors,
 )
 from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
-from pecli.scenario import load_scenario
 
 POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
 
@@ -35,7 +35,7 @@ def play(
     evader: Annotated[
         str, typer.Option("--evader", "-e", help=POLICY_HELP.format(names="greedy, random-walk, rash"))
     ] = "greedy",
-    config: ConfigOption = "paper",
+    config: PlayersConfigOption = None,
     episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes to play, all at once.")] = 100,
     seed: SeedOption = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as one JSON object.")] = False,
@@ -54,7 +54,7 @@ def play(
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
     if render is not None:
         render.parent.mkdir(parents=True, exist_ok=True)  # fail before playing, not after
-    scenario = load_scenario(config)
+    scenario = scenario_for([pursuer, evader], config)
     pursuer_policy = resolve_policy(pursuer, "pursuer", scenario)
     evader_policy = resolve_policy(evader, "evader", scenario)
     one_torch_thread()

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from pecli.cli.common import ConfigOption, err_console, user_errors
+from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
 from pecli.cli.train import BeliefChoice
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
@@ -23,7 +23,7 @@ class OpponentsChoice(str, enum.Enum):
 
 @user_errors
 def selfplay(
-    config: ConfigOption = "paper",
+    config: TrainConfigOption = None,
     rounds: Annotated[int | None, typer.Option("--rounds", "-r", help="Rounds (default: the config's). "
                                                "With --resume: more rounds extend the run.")] = None,
     steps_per_round: Annotated[
@@ -69,7 +69,7 @@ def selfplay(
         if name is None:
             raise PecliError("--resume needs the --name of the run to continue")
         run = Run.open(zoo, name)
-        scenario = run.scenario()
+        scenario = resumed_scenario(run.scenario(), config, name)
         state = read_state(run)
         if seed is not None and seed != state.seed:
             raise PecliError(f"run '{name}' plays with --seed {state.seed}; a resumed run keeps it")
@@ -82,7 +82,7 @@ def selfplay(
             raise PecliError(f"run '{name}' has played {played} rounds already: --rounds must be at least that")
         seed = state.seed
     else:
-        scenario = load_scenario(config)
+        scenario = load_scenario(config or "paper")
         seed = 0 if seed is None else seed
     if settings:
         scenario = with_overrides(scenario, settings, source="options")

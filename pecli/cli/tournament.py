@@ -10,33 +10,8 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from pecli.cli.common import console, err_console, one_torch_thread, require_positive, user_errors
+from pecli.cli.common import console, err_console, one_torch_thread, require_positive, scenario_for, user_errors
 from pecli.errors import PecliError
-from pecli.scenario import Scenario, load_scenario
-
-
-def _scenario_for(paths: list[str], config: str | None) -> Scenario:
-    """The ``--config`` scenario, else the one the first run folder found under ``paths`` was trained on
-    (or the first exported model was exported for)."""
-    from pecli.zoo import Run
-
-    if config is not None:
-        return load_scenario(config)
-    for entry in paths:
-        path = Path(entry)
-        if path.is_file() and path.suffix.lower() == ".onnx":
-            from pecli.policies.exported import exported_scenario
-            from pecli.runtime import read_sidecar, sidecar_path
-
-            return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
-        folders = [path] if path.is_dir() else [path.parent.parent] if path.is_file() else []
-        for folder in folders:
-            runs = [folder] if (folder / "config.yaml").is_file() else sorted(
-                p.parent for p in folder.rglob("config.yaml")
-            )
-            if runs:
-                return Run(runs[0]).scenario()
-    return load_scenario("paper")
 
 
 @user_errors
@@ -89,7 +64,7 @@ def tournament(
     cache = out / "pairings"
     if cache.is_dir() and any(cache.iterdir()) and not resume:
         raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, or another --out")
-    scenario = _scenario_for(paths, config)
+    scenario = scenario_for(paths, config)
     found = find_players(paths, scenario, baselines=baselines)
     for reason in found.skipped:
         err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)

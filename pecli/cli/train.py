@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from pecli.cli.common import ConfigOption, err_console, user_errors
+from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
@@ -31,7 +31,7 @@ BeliefChoice = enum.Enum("BeliefChoice", {kind.replace("-", "_"): kind for kind 
 @user_errors
 def train(
     role: Annotated[RoleChoice, typer.Argument(help="The role to train.", show_default=False)],
-    config: ConfigOption = "paper",
+    config: TrainConfigOption = None,
     opponent: Annotated[
         str | None,
         typer.Option("--opponent", "-o", help="The frozen opponent: a built-in, a checkpoint, or module:Class. "
@@ -84,7 +84,7 @@ def train(
         if name is None:
             raise PecliError("--resume needs the --name of the run to continue")
         run = Run.open(zoo, name)
-        scenario = run.scenario()
+        scenario = resumed_scenario(run.scenario(), config, name)
         last = run.checkpoint(role_name, LAST)
         if not last.is_file():
             raise PecliError(f"run '{name}' has no {role_name}/{LAST}.zip to resume from")
@@ -98,7 +98,7 @@ def train(
             raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
         opponent, seed, curriculum_steps = meta.opponent, meta.seed, scenario.training.steps
     else:
-        scenario = load_scenario(config)
+        scenario = load_scenario(config or "paper")
     if settings:
         scenario = with_overrides(scenario, settings, source="options")
     seed = 0 if seed is None else seed

@@ -106,6 +106,25 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
     )
 
 
+def stored_scenario(spec: str) -> Scenario | None:
+    """The scenario a policy file records, if it records one: an export's sidecar, or a checkpoint's
+    run ``config.yaml`` (``<run>/<role>/<name>.zip``) when its game is the one the checkpoint learned."""
+    path = Path(spec.strip())
+    if not path.is_file():
+        return None
+    if path.suffix.lower() == ".onnx":
+        from pecli.policies.exported import exported_scenario
+        from pecli.runtime import read_sidecar, sidecar_path
+
+        return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
+    if path.suffix.lower() == ".zip" and (path.parent.parent / "config.yaml").is_file():
+        from pecli.zoo import Run, read_metadata
+
+        scenario = Run(path.parent.parent).scenario()
+        return scenario if scenario.fingerprint() == read_metadata(path).scenario_hash else None
+    return None
+
+
 def _load_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
     loader = _LOADERS.get(path.suffix.lower())
     if loader is None:

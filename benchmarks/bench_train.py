@@ -15,9 +15,9 @@ transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluatio
 greedy evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
 ``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
-takes each seed's best evaluation within 10 and 30 CPU-minutes, prints their medians, and draws
-``docs/learning_curves_<belief>.png``. ``--belief`` picks the actor's belief (runs are named
-``<config>-<belief>-s<seed>``).
+takes each seed's best evaluation within each budget of ``--at`` (default 10 and 30 CPU-minutes),
+prints their medians, and draws ``docs/learning_curves_<belief>.png``. ``--belief`` picks the
+actor's belief (runs are named ``<config>-<belief>-s<seed>``).
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def report(args: argparse.Namespace) -> None:
     if not runs:
         sys.exit(f"no curve runs in {CURVES}: run the 'curves' step first")
     fig, ax = plt.subplots(figsize=(6, 4))
-    at: dict[float, list[float]] = {10.0: [], 30.0: []}
+    at: dict[float, list[float]] = {float(m): [] for m in args.at}
     for path in runs:
         cpu, rate = _read(path)
         ax.plot(cpu, rate, marker=".", label=path.parent.name)
@@ -192,6 +192,7 @@ def main() -> None:
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")
     r.add_argument("--belief", default="none")
+    r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
     args = parser.parse_args()
     {"speed": speed, "curves": curves, "report": report}[args.step](args)
 

@@ -5,16 +5,18 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from pathlib import Path
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
 from pecli.errors import PecliError
-from pecli.scenario import Scenario
+
+if TYPE_CHECKING:
+    from pecli.scenario import Scenario
 
 console = Console()
 err_console = Console(stderr=True)

@@ -119,8 +119,9 @@ def _mean(model, history: np.ndarray) -> np.ndarray:
 
 def _nll(model, history: np.ndarray, target: np.ndarray) -> float:
     with th.no_grad():
-        return float(np.mean([model.mixture(th.as_tensor(history[i:i + 2048])).nll(th.as_tensor(target[i:i + 2048])).item()
-                              for i in range(0, len(history), 2048)]))
+        total = sum(-model.mixture(th.as_tensor(history[i:i + 2048])).log_prob(th.as_tensor(target[i:i + 2048])).sum().item()
+                    for i in range(0, len(history), 2048))
+    return total / len(history)
 
 
 def _fit(model, data, validation, settings, updates: int, check_every: int) -> tuple[int, float]:

@@ -154,7 +154,7 @@ def report(args: argparse.Namespace) -> None:
         ax.plot(cpu, rate, marker=".", label=path.parent.name)
         finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
         for minutes in at:
-            if cpu.size and (cpu[-1] >= minutes or finished):
+            if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
                 at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
     ax.axhline(0.9, color="0.6", ls="--", lw=0.8)
     ax.set_xlabel("CPU minutes (one torch thread)")
@@ -169,7 +169,7 @@ def report(args: argparse.Namespace) -> None:
     for minutes, values in at.items():
         shown = ", ".join(f"{v:.2f}" for v in values) or "no run got that far"
         median = f"{statistics.median(values):.2f}" if values else "-"
-        print(f"best capture rate within {minutes:.0f} CPU-min: median {median} ({shown})")
+        print(f"best capture rate within {minutes:g} CPU-min: median {median} ({shown})")
 
 
 def main() -> None:

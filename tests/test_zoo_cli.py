@@ -96,6 +96,18 @@ def test_play_takes_the_scenario_a_checkpoint_was_trained_on(zoo: Path) -> None:
 
 def test_a_resumed_run_refuses_another_scenario(zoo: Path) -> None:
     result = invoke("train", "pursuer", "--zoo", str(zoo), "--name", "p", "--resume", "-c", "paper")
-    assert result.exit_code == 1 and "plays scenario 'quick'; a resumed run keeps it" in result.output
+    assert result.exit_code == 1 and "plays scenario 'quick'" in result.output and "drop --config" in result.output
     result = invoke("selfplay", "--zoo", str(zoo), "--name", "p", "--resume", "-c", "paper")
-    assert result.exit_code == 1 and "a resumed run keeps it" in result.output
+    assert result.exit_code == 1 and "plays scenario 'quick'" in result.output
+    same = invoke("train", "pursuer", "--zoo", str(zoo), "--name", "p", "--resume", "-c", "quick", "--seed", "5")
+    assert same.exit_code == 1 and "keeps it" in same.output and "plays scenario" not in same.output  # past the check
+
+
+def test_a_damaged_run_config_leaves_the_scenario_to_config(zoo: Path, tmp_path: Path) -> None:
+    run = tmp_path / "damaged"
+    shutil.copytree(zoo / "p", run)
+    (run / "config.yaml").write_text("arena: [not, a, mapping")
+    result = invoke("play", "-p", str(run / "pursuer" / "final.zip"), "-c", "quick", "-n", "2", "--json")
+    assert result.exit_code == 0, result.output
+    result = invoke("play", "-p", str(run / "pursuer" / "final.zip"), "-n", "2")  # falls back to paper, then refuses
+    assert result.exit_code == 1 and "pass the config it was trained with" in result.output

@@ -25,16 +25,14 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 DEBUG_VARIABLE = "PECLI_DEBUG"
 
-ConfigOption = Annotated[
-    str,
-    typer.Option("--config", "-c", help="Scenario YAML file, or a built-in name: paper, quick, car_vs_car, point_mass, robots."),
-]
+BUILTIN_CONFIGS = "paper, quick, car_vs_car, point_mass, robots"
 PlayersConfigOption = Annotated[
     str | None,
     typer.Option(
         "--config",
         "-c",
-        help="Scenario YAML file or built-in name; default: the scenario a policy file was trained on, else paper.",
+        help=f"Scenario YAML file or built-in name ({BUILTIN_CONFIGS}); default: the one a policy file was "
+        "trained on, else paper.",
         show_default=False,
     ),
 ]
@@ -43,7 +41,7 @@ TrainConfigOption = Annotated[
     typer.Option(
         "--config",
         "-c",
-        help="Scenario YAML file or built-in name (default: paper; a resumed run keeps its own).",
+        help=f"Scenario YAML file or built-in name ({BUILTIN_CONFIGS}); default: paper (a resumed run keeps its own).",
         show_default=False,
     ),
 ]
@@ -99,9 +97,9 @@ def require_positive(value: int, name: str) -> int:
     return value
 
 
-def scenario_for(players: list[str], config: str | None) -> Scenario:
+def scenario_for(players: list[str], config: str | None, folders: bool = False) -> Scenario:
     """The ``--config`` scenario, else the one the first of ``players`` records (a checkpoint's run, an
-    export's sidecar, the first run folder found under a directory), else the paper's."""
+    export's sidecar; with ``folders``, the first run found under a folder), else the paper's."""
     from pecli.policies import stored_scenario
     from pecli.scenario import load_scenario
     from pecli.zoo import Run
@@ -109,11 +107,10 @@ def scenario_for(players: list[str], config: str | None) -> Scenario:
     if config is not None:
         return load_scenario(config)
     for player in players:
-        path = Path(player)
-        if path.is_file():
-            if (scenario := stored_scenario(player)) is not None:
-                return scenario
-        elif path.is_dir():
+        if (scenario := stored_scenario(player)) is not None:
+            return scenario
+        path = Path(player.strip())
+        if folders and path.is_dir():
             runs = [path] if (path / "config.yaml").is_file() else sorted(p.parent for p in path.rglob("config.yaml"))
             if runs:
                 return Run(runs[0]).scenario()
@@ -125,5 +122,6 @@ def resumed_scenario(run_scenario: Scenario, config: str | None, name: str) -> S
     from pecli.scenario import load_scenario
 
     if config is not None and load_scenario(config).fingerprint() != run_scenario.fingerprint():
-        raise PecliError(f"run '{name}' plays scenario '{run_scenario.name}'; a resumed run keeps it (drop --config)")
+        raise PecliError(f"run '{name}' plays scenario '{run_scenario.name}' ({run_scenario.fingerprint()}), another game "
+                         "than --config's; a resumed run keeps its own (drop --config)")
     return run_scenario

@@ -64,7 +64,7 @@ def tournament(
     cache = out / "pairings"
     if cache.is_dir() and any(cache.iterdir()) and not resume:
         raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, or another --out")
-    scenario = scenario_for(paths, config)
+    scenario = scenario_for(paths, config, folders=True)
     found = find_players(paths, scenario, baselines=baselines)
     for reason in found.skipped:
         err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)

@@ -1,9 +1,9 @@
 """The solution cache: one ``.npz`` per problem key, reused while nothing that decides the value changed.
 
 The folder is ``$PECLI_HJ_CACHE`` if set, else ``$XDG_CACHE_HOME/pecli/hj`` (``~/.cache/pecli/hj``).
-A file is named ``<model>-<key>.npz``; the key (:meth:`pecli.hj.problem.Problem.key`) hashes the
-game's numbers, the model, the grid, the order, the horizon, the backend and the solver's version,
-so any change to one of them misses the cache, and an unreadable file is solved again.
+A file is named ``<model>-<key>.npz``; the key (:meth:`pecli.hj.problem.Problem.cache_key`) hashes
+the game's numbers, the model, the grid solved on, the order, the horizon, the backend and the
+solver's version, so any change to one of them misses the cache, and an unreadable file is solved again.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def cache_dir() -> Path:
 
 def cache_path(problem: Problem) -> Path:
     """Where the solution of ``problem`` is cached."""
-    return cache_dir() / f"{problem.model}-{problem.key()}.npz"
+    return cache_dir() / f"{problem.model}-{problem.cache_key()}.npz"
 
 
 def cached(problem: Problem, path: Path | None = None) -> Solution | None:
@@ -41,7 +41,7 @@ def cached(problem: Problem, path: Path | None = None) -> Solution | None:
         solution = Solution.load(path)
     except SolutionError:
         return None
-    return solution if solution.key == problem.key() else None
+    return solution if solution.problem.cache_key() == problem.cache_key() else None
 
 
 def solve_cached(

@@ -158,10 +158,13 @@ class Problem:
         )
 
     def key(self) -> str:
-        """A hash of every parameter and of the solver's version: equal keys, equal solutions.
+        """A hash of every parameter and of the solver's version: equal keys, equal solutions."""
+        text = json.dumps({"solver": SOLVER_VERSION, **self.to_dict()}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
 
-        The grid enters as the axes actually solved on, so two requested sizes that ``rel4d`` snaps
-        to the same grid share one solution."""
+    def cache_key(self) -> str:
+        """Like :meth:`key`, but with the grid as the axes actually solved on, so that requested sizes
+        ``rel4d`` snaps to one grid share one cached solution."""
         payload = {key: value for key, value in self.to_dict().items() if key != "sizes"}
         axes = [[axis.name, axis.low, axis.high, axis.n] for axis in (*self.grid.x_axes, *self.grid.y_axes)]
         text = json.dumps({"solver": SOLVER_VERSION, "axes": axes, **payload}, sort_keys=True)

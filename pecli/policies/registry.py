@@ -18,7 +18,7 @@ import inspect
 from collections.abc import Callable
 from pathlib import Path
 
-from pecli.errors import PolicyError
+from pecli.errors import PecliError, PolicyError
 from pecli.policies.base import HeuristicPolicy, Policy
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
 from pecli.roles import Role
@@ -107,21 +107,25 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
 
 
 def stored_scenario(spec: str) -> Scenario | None:
-    """The scenario a policy file records, if it records one: an export's sidecar, or a checkpoint's
-    run ``config.yaml`` (``<run>/<role>/<name>.zip``) when its game is the one the checkpoint learned."""
+    """The scenario a policy file records, if it records one readably: an export's sidecar, or a
+    checkpoint's run ``config.yaml`` (``<run>/<role>/<name>.zip``) when its game is the one the
+    checkpoint learned. ``None`` otherwise: loading the file then reports what is wrong with it."""
     path = Path(spec.strip())
-    if not path.is_file():
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".onnx" and path.is_file():
+            from pecli.policies.exported import exported_scenario
+            from pecli.runtime import read_sidecar, sidecar_path
+
+            return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
+        if suffix == ".zip" and path.is_file() and (path.parent.parent / "config.yaml").is_file():
+            from pecli.zoo import Run, read_metadata
+
+            learned = read_metadata(path).scenario_hash
+            scenario = Run(path.parent.parent).scenario()
+            return scenario if scenario.fingerprint() == learned else None
+    except PecliError:
         return None
-    if path.suffix.lower() == ".onnx":
-        from pecli.policies.exported import exported_scenario
-        from pecli.runtime import read_sidecar, sidecar_path
-
-        return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
-    if path.suffix.lower() == ".zip" and (path.parent.parent / "config.yaml").is_file():
-        from pecli.zoo import Run, read_metadata
-
-        scenario = Run(path.parent.parent).scenario()
-        return scenario if scenario.fingerprint() == read_metadata(path).scenario_hash else None
     return None
 
 

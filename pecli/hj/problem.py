@@ -159,18 +159,22 @@ class Problem:
 
     def key(self) -> str:
         """A hash of every parameter and of the solver's version: equal keys, equal solutions."""
-        text = json.dumps({"solver": SOLVER_VERSION, **self.to_dict()}, sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return _digest(self.to_dict())
 
     def cache_key(self) -> str:
         """Like :meth:`key`, but with the grid as the axes actually solved on, so that requested sizes
         ``rel4d`` snaps to one grid share one cached solution."""
         payload = {key: value for key, value in self.to_dict().items() if key != "sizes"}
-        axes = [[axis.name, axis.low, axis.high, axis.n] for axis in (*self.grid.x_axes, *self.grid.y_axes)]
-        text = json.dumps({"solver": SOLVER_VERSION, "axes": axes, **payload}, sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        payload["axes"] = [[axis.name, axis.low, axis.high, axis.n] for axis in (*self.grid.x_axes, *self.grid.y_axes)]
+        return _digest(payload)
 
     def describe(self) -> str:
         """``rel4d 23x81x23x81 maxmin T=100`` style."""
         backend = "" if self.backend == "numpy" else f" ({self.backend})"
         return f"{self.model} {self.grid.describe()} {self.order} T={self.steps}{backend}"
+
+
+def _digest(payload: dict) -> str:
+    """16 hex digits of the SHA-256 of ``payload`` and the solver's version, as canonical JSON."""
+    text = json.dumps({"solver": SOLVER_VERSION, **payload}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -64,6 +64,7 @@ class CheckpointMeta:
     history_stride: int
     run: str = ""
     seed: int = 0
+    cpu_seconds: float = 0.0  # CPU time the run had spent training when this was written, across resumes
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against

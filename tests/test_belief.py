@@ -11,6 +11,7 @@ import torch as th
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from pecli.belief.bimdn import BiMDN
+from pecli.belief.frame import BeliefFrame
 from pecli.belief.image import rasterise
 from pecli.belief.mixture import Mixture
 from pecli.belief.model import BeliefModel
@@ -18,7 +19,9 @@ from pecli.belief.ukf import BatchUKF, transition
 from pecli.belief.window import WindowDecoder
 from pecli.game import Game
 from pecli.game.memory import HistoryWindow
-from pecli.scenario import Scenario
+from pecli.game.observation import ObservationCodec
+from pecli.rl.train import TrainJob, belief_kwargs
+from pecli.scenario import Scenario, load_scenario
 
 
 def test_nll_matches_the_closed_form_density() -> None:
@@ -171,3 +174,43 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
     assert weights.shape == (frames, 2, 3) and means.shape == (frames, 2, 3, 2) and stds.shape == (frames, 2, 3, 2)
     assert "evader" not in recording.beliefs  # the greedy evader has no belief
     assert draw_episodes(recording, tmp_path / "beliefs.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("role", ["pursuer", "evader"])
+@pytest.mark.parametrize("config", ["paper", "car_vs_car"])
+def test_own_frame_belief_reads_like_the_seen_opponent(role: str, config: str) -> None:
+    """A belief at the opponent's true position gives the numbers the observation gives a seen opponent."""
+    scenario = load_scenario(config).model_copy(update={"observation_frame": "own"})
+    game = Game(scenario, n=4000, seed=0)
+    game.reset(seed=0)
+    obs = game.step(np.random.default_rng(0).uniform(-1, 1, (4000, 2)), np.zeros((4000, 2))).obs[role]
+    codec = ObservationCodec(scenario, role)
+    seen = obs[:, codec.seen_index] > 0
+    assert seen.sum() > 50
+    kp = game.dynamics["pursuer"].state_dim
+    truth = game.normalised_state()[:, kp:kp + 2] if role == "pursuer" else game.normalised_state()[:, 0:2]
+    frame = BeliefFrame(codec, "own")
+    points = frame(th.as_tensor(truth), th.as_tensor(obs)).numpy()
+    block = obs[:, codec.opp_slice][:, :2]
+    np.testing.assert_allclose(points[seen], block[seen], atol=1e-4)
+    draws = frame(th.as_tensor(np.stack([truth, truth], axis=1)), th.as_tensor(obs)).numpy()  # (B, S, 2) points
+    np.testing.assert_allclose(draws[:, 1], points, atol=1e-6)
+
+
+def test_world_frame_keeps_the_points_and_the_model_defaults_to_it(paper: Scenario) -> None:
+    history, _ = windows(paper, n=8, steps=30)
+    world = BeliefModel("bimdn", (20, 11), paper.model_dump(mode="json"), "pursuer")  # as old checkpoints load
+    own = BeliefModel("bimdn", (20, 11), paper.model_dump(mode="json"), "pursuer", frame="own")
+    own.load_state_dict(world.state_dict())
+    mean = world.mixture(th.as_tensor(history)).mean().detach().numpy()
+    np.testing.assert_allclose(world.features_numpy(history), mean, atol=1e-6)
+    assert not np.allclose(own.features_numpy(history), mean, atol=1e-2)
+    with pytest.raises(ValueError, match="unknown belief frame"):
+        BeliefModel("bimdn", (20, 11), paper.model_dump(mode="json"), "pursuer", frame="body")
+
+
+@pytest.mark.parametrize("frame", ["own", "world"])
+def test_training_gives_the_belief_the_observation_frame(paper: Scenario, frame: str) -> None:
+    scenario = paper.model_copy(update={"observation_frame": frame})
+    job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="n")
+    assert BeliefModel(**{**belief_kwargs(job), "kind": "bimdn"}).frame.frame == frame

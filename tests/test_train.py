@@ -93,11 +93,15 @@ def test_damaged_checkpoints_give_clear_errors(trained: Path, tmp_path: Path, qu
     assert result.exit_code == 1 and "Traceback" not in result.output
 
 
-def test_resume_continues_the_run(trained: Path) -> None:
+def test_resume_continues_the_run(trained: Path, monkeypatch) -> None:
+    before = json.loads((trained / "run" / "pursuer" / "last.json").read_text())["cpu_seconds"]
+    assert before > 0
+    monkeypatch.setattr("pecli.rl.train.time.process_time", lambda: 2.5)  # the resumed process's own CPU time
     result = invoke(["train", "pursuer", "--zoo", str(trained), "--name", "run", "--resume", "--steps", "1500", "-q"])
     assert result.exit_code == 0, result.output
     meta = json.loads((trained / "run" / "pursuer" / "final.json").read_text())
     assert meta["steps"] == 1500
+    assert meta["cpu_seconds"] == pytest.approx(before + 2.5)  # the run's CPU time goes on from where it stopped
     assert (trained / "run" / "command.txt").read_text().count("train pursuer") == 2
 
 

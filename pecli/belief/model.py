@@ -7,7 +7,9 @@ Kinds:
 ``ukf``          an unscented Kalman filter run over the window; features: its mean
 ``image``        the window rasterised into a top-down image, a small CNN, the BiMDN's mixture head
 
-Positions are in the world frame, normalised by the arena's half-extents.
+The mixture is over positions in the world frame, normalised by the arena's half-extents; the
+actor's features are its points moved into the frame of the actor's observation
+(:class:`~pecli.belief.frame.BeliefFrame`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from torch import nn
 
 from pecli.belief import BELIEF_KINDS
 from pecli.belief.bimdn import BiMDN
+from pecli.belief.frame import BeliefFrame
 from pecli.belief.mixture import Mixture
 from pecli.belief.window import WindowDecoder
 from pecli.roles import Role
@@ -43,6 +46,8 @@ class BeliefModel(nn.Module):
         role: the player holding the belief.
         hidden, fc, components: BiMDN sizes (paper: 128, 32, 3).
         samples: draws for ``bimdn-mixed`` (paper: 16).
+        frame: the frame of the actor's features, the scenario's ``observation_frame`` (``world`` for
+            checkpoints written before the option existed).
     """
 
     def __init__(
@@ -55,12 +60,14 @@ class BeliefModel(nn.Module):
         fc: int = 32,
         components: int = 3,
         samples: int = 16,
+        frame: str = "world",
     ) -> None:
         super().__init__()
         if kind not in BELIEF_KINDS or kind == "none":
             raise ValueError(f"unknown belief kind {kind!r}")
         self.kind, self.window, self.samples = kind, tuple(window), samples
         self.decoder = WindowDecoder(scenario_from_dict(scenario), role)
+        self.frame = BeliefFrame(self.decoder.codec, frame)
         self.net: nn.Module | None
         if kind in ("bimdn", "bimdn-mixed"):
             self.net = BiMDN(window[1], hidden, fc, components)
@@ -95,12 +102,17 @@ class BeliefModel(nn.Module):
         ``draws`` are the random numbers of a ``bimdn-mixed`` belief, ``uniform (B, samples)`` and
         ``normal (B, samples, 2)`` (see :meth:`Mixture.sample_with`); without them it draws from torch's RNG.
         """
-        mixture = self.mixture(history)
+        return self.features_of(self.mixture(history), history.reshape(history.shape[0], *self.window)[:, -1], draws)
+
+    def features_of(
+        self, mixture: Mixture, newest: th.Tensor, draws: tuple[th.Tensor, th.Tensor] | None = None
+    ) -> th.Tensor:
+        """The actor's features from a mixture and the window's newest row ``(B, dim)`` (the observer's pose)."""
         if self.kind == "bimdn-mixed":
-            if draws is not None:
-                return mixture.sample_with(*draws).flatten(1)
-            return mixture.sample(self.samples).flatten(1)
-        return mixture.mean()
+            points = mixture.sample_with(*draws) if draws is not None else mixture.sample(self.samples)
+        else:
+            points = mixture.mean()
+        return self.frame(points, newest).flatten(1)
 
     def features_numpy(self, history: np.ndarray) -> np.ndarray:
         return self.features(th.as_tensor(history, dtype=th.float32)).numpy()

@@ -136,12 +136,19 @@ class Evaluation(BaseCallback):
     """Every ``every`` learner transitions, play ``episodes`` batched games against a fixed opponent.
 
     ``evaluate(model)`` returns the capture rate; each result is logged to TensorBoard and appended
-    to ``csv_path`` with the learner's steps and the process's CPU time (for learning curves).
+    to ``csv_path`` with the learner's steps and the run's CPU time (for learning curves): ``clock()``,
+    by default the process's, which a resumed run offsets by what it had spent before.
     """
 
-    def __init__(self, evaluate: Callable[[object], float], every: int, csv_path: Path) -> None:
+    def __init__(
+        self,
+        evaluate: Callable[[object], float],
+        every: int,
+        csv_path: Path,
+        clock: Callable[[], float] = time.process_time,
+    ) -> None:
         super().__init__()
-        self.evaluate = evaluate
+        self.evaluate, self.clock = evaluate, clock
         self.every = every
         self.csv_path = csv_path
         self._next = 0
@@ -164,7 +171,7 @@ class Evaluation(BaseCallback):
         self.logger.record("eval/capture_rate", rate)
         with self.csv_path.open("a", newline="") as handle:
             csv.writer(handle).writerow(
-                [self.num_timesteps, f"{time.process_time():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
+                [self.num_timesteps, f"{self.clock():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
             )
         return rate
 

@@ -102,8 +102,8 @@ class TrainJob:
     curriculum_steps: int | None = None
 
 
-def checkpoint_meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
-    """The metadata written beside a checkpoint of ``model`` after ``episodes`` episodes."""
+def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float = 0.0) -> CheckpointMeta:
+    """The metadata written beside a checkpoint of ``model`` after ``episodes`` episodes and ``cpu_seconds``."""
     t = job.scenario.training
     return CheckpointMeta(
         role=job.role,
@@ -120,6 +120,7 @@ def checkpoint_meta(job: TrainJob, model: Any, episodes: int) -> CheckpointMeta:
         history_stride=t.history_stride,
         run=job.name,
         seed=job.seed,
+        cpu_seconds=round(cpu_seconds, 2),
     )
 
 
@@ -131,6 +132,7 @@ def belief_kwargs(job: TrainJob) -> dict[str, Any]:
     return {
         "kind": t.belief, "window": (window_length, dim), "scenario": job.scenario.model_dump(mode="json"),
         "role": job.role, "hidden": b.hidden, "fc": b.fc, "components": b.components, "samples": b.samples,
+        "frame": job.scenario.observation_frame,
     }
 
 
@@ -220,13 +222,13 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
         run.log_command()
-        episodes = meta.episodes
+        episodes, cpu_before = meta.episodes, meta.cpu_seconds
     else:
         Run.check_new(job.zoo, job.name)
         env = make_env(job, opponent, job.seed)
         model = make_model(job, env, job.zoo / job.name / "tb")
         run = Run.create(job.zoo, job.name, job.scenario)
-        episodes = 0
+        episodes, cpu_before = 0, 0.0
     belief = None
     if isinstance(env, BeliefVecEnv):
         belief = model.policy.actor.features_extractor.belief
@@ -234,13 +236,19 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     if on_start is not None:
         on_start(run)
 
+    def cpu_seconds() -> float:  # the run's CPU time: the stopped processes' (from the checkpoint) and this one's
+        return cpu_before + time.process_time()
+
+    def meta_now(episodes: int) -> CheckpointMeta:
+        return checkpoint_meta(job, model, episodes, cpu_seconds())
+
     stats = EpisodeStats(episodes=episodes)
     next_checkpoint = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
 
     def checkpoint(total: int) -> None:
         nonlocal next_checkpoint
         while total >= next_checkpoint:
-            run.save(model, job.role, Run.episode_name(next_checkpoint), checkpoint_meta(job, model, total))
+            run.save(model, job.role, Run.episode_name(next_checkpoint), meta_now(total))
             next_checkpoint += t.checkpoint_every
 
     stats.listeners.append(checkpoint)
@@ -258,7 +266,8 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         run.load_replay_buffer(model, job.role, fit)
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
-        callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv"))
+        callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv",
+                                    cpu_seconds))
 
     remaining = t.steps - model.num_timesteps
     try:
@@ -270,16 +279,16 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
                 tb_log_name=job.role,
             )
     except KeyboardInterrupt:
-        last = run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
+        last = run.save(model, job.role, LAST, meta_now(stats.episodes))
         run.save_replay_buffer(model, job.role, fit)
         raise TrainingInterrupted(last) from None
     finally:
         logger = getattr(model, "_logger", None)
         if logger is not None:
             logger.close()
-    run.save(model, job.role, LAST, checkpoint_meta(job, model, stats.episodes))
+    run.save(model, job.role, LAST, meta_now(stats.episodes))
     run.save_replay_buffer(model, job.role, fit)
-    return run.save(model, job.role, FINAL, checkpoint_meta(job, model, stats.episodes))
+    return run.save(model, job.role, FINAL, meta_now(stats.episodes))
 
 
 def default_run_name(what: str, scenario: Scenario, seed: int) -> str:

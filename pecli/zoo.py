@@ -38,6 +38,7 @@ from pecli.scenario import Scenario, scenario_from_dict
 
 FINAL = "final"
 LAST = "last"
+BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
 REPLAY_BUFFER = "replay_buffer.pkl"
 BELIEF_STATE = "belief_fit.pt"
 
@@ -65,6 +66,7 @@ class CheckpointMeta:
     run: str = ""
     seed: int = 0
     cpu_seconds: float = 0.0  # CPU time the run had spent training when this was written, across resumes
+    eval_capture_rate: float | None = None  # best.zip: the capture rate of the evaluation that made it the best
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against

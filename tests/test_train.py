@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import sys
@@ -15,7 +16,7 @@ from typer.testing import CliRunner
 from pecli.cli import app
 from pecli.errors import PolicyError
 from pecli.policies import resolve_policy
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation
 from pecli.scenario import Scenario
 
 runner = CliRunner()
@@ -187,3 +188,31 @@ def test_curriculum_schedule(paper: Scenario) -> None:
         name, got_fov, got_scale = env.calls[-1]
         assert name == "set_curriculum"
         assert got_fov == pytest.approx(fov) and got_scale == pytest.approx(scale)
+
+
+def test_evaluations_log_and_keep_the_best_checkpoint(tmp_path: Path) -> None:
+    result = invoke(["train", "pursuer", "-c", "quick", "--zoo", str(tmp_path), "--name", "run", "-q", *TINY,
+                     "--steps", "1200", "--set", "eval_every=300", "--set", "eval_episodes=10"])
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader((tmp_path / "run" / "eval_pursuer.csv").open()))
+    assert [int(row["steps"]) for row in rows] == [300, 600, 900, 1200]
+    cpu = [float(row["cpu_seconds"]) for row in rows]
+    assert cpu == sorted(cpu) and cpu[0] > 0
+    rates = [float(row["capture_rate"]) for row in rows]
+    best = json.loads((tmp_path / "run" / "pursuer" / "best.json").read_text())
+    assert best["eval_capture_rate"] == pytest.approx(max(rates))
+    assert best["steps"] == int(rows[rates.index(max(rates))]["steps"])  # the first evaluation that reached it
+
+
+@pytest.mark.parametrize("maximise, saved", [(True, [0.5, 0.6]), (False, [0.2, 0.1])])
+def test_the_best_evaluation_depends_on_the_role(tmp_path: Path, maximise: bool, saved: list[float]) -> None:
+    path = tmp_path / "eval.csv"
+    path.write_text("steps,cpu_seconds,wall_seconds,capture_rate\n10,1.0,1.0,0.3000\n")  # a resumed run's log
+    rates = iter([0.2, 0.5, 0.4, 0.1, 0.6])
+    best: list[float] = []
+    callback = Evaluation(lambda model: next(rates), every=1, csv_path=path, on_best=best.append, maximise=maximise)
+    callback.num_timesteps, callback.model = 20, mock.Mock()  # the model only serves the logger here
+    callback._on_training_start()
+    for _ in range(5):
+        callback.record()
+    assert best == saved  # each better than the log's 0.3 and than every earlier one

@@ -137,7 +137,10 @@ class Evaluation(BaseCallback):
 
     ``evaluate(model)`` returns the capture rate; each result is logged to TensorBoard and appended
     to ``csv_path`` with the learner's steps and the run's CPU time (for learning curves): ``clock()``,
-    by default the process's, which a resumed run offsets by what it had spent before.
+    by default the process's, which a resumed run offsets by what it had spent before. An evaluation
+    better than every earlier one of the run (those already in ``csv_path`` included) calls
+    ``on_best(rate)``; better is a higher capture rate for a pursuer (``maximise``), a lower one for
+    an evader.
     """
 
     def __init__(
@@ -146,16 +149,24 @@ class Evaluation(BaseCallback):
         every: int,
         csv_path: Path,
         clock: Callable[[], float] = time.process_time,
+        on_best: Callable[[float], None] | None = None,
+        maximise: bool = True,
     ) -> None:
         super().__init__()
-        self.evaluate, self.clock = evaluate, clock
+        self.evaluate, self.clock, self.on_best = evaluate, clock, on_best
+        self.sign = 1.0 if maximise else -1.0
+        self.best = -math.inf  # the best score, sign * capture rate
         self.every = every
         self.csv_path = csv_path
         self._next = 0
 
     def _on_training_start(self) -> None:
         self._next = (self.num_timesteps // self.every + 1) * self.every
-        if not self.csv_path.exists():
+        if self.csv_path.exists():  # a resumed run: its best so far is in its log
+            with self.csv_path.open(newline="") as handle:
+                rates = [float(row["capture_rate"]) for row in csv.DictReader(handle)]
+            self.best = max((self.sign * rate for rate in rates), default=-math.inf)
+        else:
             with self.csv_path.open("w", newline="") as handle:
                 csv.writer(handle).writerow(["steps", "cpu_seconds", "wall_seconds", "capture_rate"])
         self._wall = time.perf_counter()
@@ -173,6 +184,10 @@ class Evaluation(BaseCallback):
             csv.writer(handle).writerow(
                 [self.num_timesteps, f"{self.clock():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
             )
+        if self.sign * rate > self.best:
+            self.best = self.sign * rate
+            if self.on_best is not None:
+                self.on_best(rate)
         return rate
 
 

@@ -30,7 +30,7 @@ from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.policies import CentralCriticPolicy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import FINAL, LAST, CheckpointMeta, Run, read_metadata
+from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -266,8 +266,14 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         run.load_replay_buffer(model, job.role, fit)
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
+
+        def save_best(rate: float) -> None:
+            meta = meta_now(stats.episodes)
+            meta.eval_capture_rate = round(rate, 4)
+            run.save(model, job.role, BEST, meta)
+
         callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv",
-                                    cpu_seconds))
+                                    cpu_seconds, save_best, maximise=job.role == "pursuer"))
 
     remaining = t.steps - model.num_timesteps
     try:

@@ -65,7 +65,7 @@ class CheckpointMeta:
     history_stride: int
     run: str = ""
     seed: int = 0
-    cpu_seconds: float = 0.0  # CPU time the run had spent training when this was written, across resumes
+    cpu_seconds: float | None = None  # pecli train: the run's CPU time when this was written, across resumes
     eval_capture_rate: float | None = None  # best.zip: the capture rate of the evaluation that made it the best
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)

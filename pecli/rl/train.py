@@ -102,7 +102,7 @@ class TrainJob:
     curriculum_steps: int | None = None
 
 
-def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float = 0.0) -> CheckpointMeta:
+def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float | None = None) -> CheckpointMeta:
     """The metadata written beside a checkpoint of ``model`` after ``episodes`` episodes and ``cpu_seconds``."""
     t = job.scenario.training
     return CheckpointMeta(
@@ -120,7 +120,7 @@ def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float
         history_stride=t.history_stride,
         run=job.name,
         seed=job.seed,
-        cpu_seconds=round(cpu_seconds, 2),
+        cpu_seconds=None if cpu_seconds is None else round(cpu_seconds, 2),
     )
 
 
@@ -222,7 +222,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
         run.log_command()
-        episodes, cpu_before = meta.episodes, meta.cpu_seconds
+        episodes, cpu_before = meta.episodes, meta.cpu_seconds or 0.0
     else:
         Run.check_new(job.zoo, job.name)
         env = make_env(job, opponent, job.seed)

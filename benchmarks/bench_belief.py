@@ -155,8 +155,10 @@ def quality(args: argparse.Namespace) -> None:
     th.manual_seed(0)
     scenario = load_scenario(args.config)
     evaders = ["random-walk", "greedy", "rash"]
-    train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
-    valid_x, valid_y, _ = _windows(scenario, evaders, max(args.games // 10, 10), seed=500)
+    learned = [kind for kind in args.kinds if kind in ("bimdn", "image")]
+    if learned:
+        train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
+        valid_x, valid_y, _ = _windows(scenario, evaders, max(args.games // 10, 10), seed=500)
     test_x, test_y, test_unseen = _windows(scenario, evaders, args.test_games, seed=1000)
     half = np.array(scenario.arena.half)
     settings = scenario.training.belief_settings
@@ -167,15 +169,16 @@ def quality(args: argparse.Namespace) -> None:
     decoder = BeliefModel("ukf", **kwargs).decoder
     last, sighted = _last_seen(decoder, test_x)
     means: dict[str, np.ndarray] = {"last seen": last, "centre": np.zeros_like(last)}
-    for kind in ("bimdn", "image", "ukf"):
+    for kind in args.kinds:
         model = BeliefModel(kind, **kwargs)
         if model.learned:
             best, seconds = _fit(model, (train_x, train_y), (valid_x, valid_y), settings, args.updates, args.check_every)
             print(f"{kind}: {args.updates} updates in {seconds:.0f} s; kept update {best} (best validation NLL)")
         means[kind] = _mean(model, test_x)
-    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {len(train_x)} training windows "
-          f"({args.games} games per evader), {int(test_unseen.sum())} held-out unseen moments "
-          f"({args.test_games} other games per evader); up to {args.updates} updates of batch {settings.batch_size}")
+    fitted = (f"{len(train_x)} training windows ({args.games} games per evader), up to {args.updates} updates "
+              f"of batch {settings.batch_size}; " if learned else "")
+    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {fitted}{int(test_unseen.sum())} held-out "
+          f"unseen moments ({args.test_games} other games per evader)")
     groups = {"all unseen": test_unseen, "a sighting in the window": test_unseen & sighted,
               "none in the window": test_unseen & ~sighted}
     print("| belief | " + " | ".join(f"{name} ({int(mask.sum())})" for name, mask in groups.items()) + " |")
@@ -249,6 +252,8 @@ def main() -> None:
     q.add_argument("--test-games", type=int, default=300, help="held-out games per evader")
     q.add_argument("--updates", type=int, default=6000)
     q.add_argument("--check-every", type=int, default=250, help="updates between validation checks")
+    q.add_argument("--kinds", nargs="+", default=["bimdn", "image", "ukf"], choices=["bimdn", "image", "ukf"],
+                   help="the beliefs to fit and score ('last seen' and the centre are always scored)")
     c = sub.add_parser("capture")
     c.add_argument("--config", default="paper")
     c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])

@@ -27,6 +27,7 @@ from pecli.belief.window import WindowDecoder
 from pecli.export.beliefs import KalmanWindow, RasterImage
 from pecli.export.encoder import SIEncoder, WindowGeometry
 from pecli.game.memory import HistoryWindow
+from pecli.game.observation import ObservationCodec
 from pecli.game import Game
 from pecli.game.si import SILayout
 from pecli.policies import resolve_policy
@@ -135,6 +136,26 @@ def test_the_graphs_ukf_and_rasteriser_match_numpys(scenario: Scenario) -> None:
         np.testing.assert_allclose(stds.numpy(), expected.stds.numpy(), rtol=0, atol=1e-6)
         image = RasterImage(geometry, decoder, GRID)(rows).numpy()
         np.testing.assert_array_equal(image, rasterise(decoder(history), decoder))
+
+
+def test_the_ukf_belief_stays_in_the_arena(paper: Scenario) -> None:
+    """A sighting's velocity carried on for 15 s leaves the 16 m arena; the belief's mean stops at the wall."""
+    codec = ObservationCodec(paper, "pursuer")
+    own = np.zeros((7, 20))
+    own[5] = 1.0  # at the centre, facing +x: cos psi = 1
+    opp = np.zeros((4, 20))
+    opp[0] = np.minimum(1.0 + 1.5 * np.arange(20), 7.9)  # m; the truth stops at the wall
+    opp[2] = 1.5  # m/s towards +x
+    seen = (np.arange(20) < 4).astype(float)  # seen for the first 4 s, within range
+    rows = codec.encode(own, opp, opp[0] - own[0], opp[1] - own[1], seen, np.zeros(20))
+    history = rows.reshape(1, -1)
+    decoder = WindowDecoder(paper, "pursuer")
+    unclamped = 1.0 + 1.5 * 19  # what the constant-velocity filter extrapolates to, m
+    assert unclamped / paper.arena.half[0] > 1.5
+    mean = WindowUKF(decoder)(history).means[0, 0].numpy()
+    np.testing.assert_allclose(mean, [1.0, 0.0], atol=0.02)  # at the wall, not 20 m beyond it
+    _, graph_means, _ = KalmanWindow(WindowGeometry(SILayout(paper, "pursuer")), decoder.dt)(th.as_tensor(rows[None]))
+    np.testing.assert_allclose(graph_means[0, 0].numpy(), mean, atol=1e-6)
 
 
 @pytest.mark.parametrize("scenario", all_scenarios(), ids=lambda s: f"{s.name}-{s.observation_frame}")

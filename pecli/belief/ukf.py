@@ -4,7 +4,9 @@ The filter's state is the opponent's ``(x, y, v_x, v_y)`` (normalised positions,
 starts at the arena's centre, predicts one window spacing (1 s in the paper) per sample and
 updates with the opponent's position whenever it was seen. Sigma points and weights are
 filterpy's ``MerweScaledSigmaPoints`` (alpha 0.1, beta 2, kappa 1); process noise, measurement
-noise and initial covariance are 0.1 (the paper's values). The filter runs batched over games;
+noise and initial covariance are 0.1 (the paper's values). The belief's mean is the filter's,
+projected into the arena **(ours)**: extrapolating a sighting's velocity for up to 20 s otherwise
+often "believes" the opponent beyond a wall. The filter runs batched over games;
 ``tests/test_belief.py`` checks it against filterpy's ``UnscentedKalmanFilter`` step by step.
 """
 
@@ -94,6 +96,6 @@ class WindowUKF:
         std = np.sqrt(np.clip(np.diagonal(ukf.p, axis1=1, axis2=2)[:, :2], 1e-9, None))
         return Mixture(
             logits=th.zeros((batch, 1)),
-            means=th.as_tensor(ukf.x[:, None, :2], dtype=th.float32),
+            means=th.as_tensor(np.clip(ukf.x[:, None, :2], -1.0, 1.0), dtype=th.float32),  # inside the arena
             stds=th.as_tensor(std[:, None, :], dtype=th.float32),
         )

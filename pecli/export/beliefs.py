@@ -72,7 +72,7 @@ class KalmanWindow(nn.Module):
             x, p = self._update(x, p, opp_pos[:, t], predict & seen[:, t])
         std = th.sqrt(th.clamp(th.stack([p[:, 0, 0], p[:, 1, 1]], dim=-1), min=1e-9))  # (B, 2)
         logits = th.zeros_like(std[:, :1]).float()
-        return logits, x[:, None, :2].float(), std[:, None, :].float()
+        return logits, th.clamp(x[:, None, :2], -1.0, 1.0).float(), std[:, None, :].float()  # mean inside the arena
 
     def _update(self, x: th.Tensor, p: th.Tensor, z: th.Tensor, rows: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         s = p[:, :2, :2] + self.noise * th.eye(2, dtype=th.float64)  # (B, 2, 2) innovation covariance

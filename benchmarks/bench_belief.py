@@ -149,13 +149,13 @@ def _fit(model, data, validation, settings, updates: int, check_every: int) -> t
 
 
 def quality(args: argparse.Namespace) -> None:
-    from pecli.belief.model import BeliefModel
+    from pecli.belief.model import LEARNED_KINDS, BeliefModel
     from pecli.scenario import load_scenario
 
     th.manual_seed(0)
     scenario = load_scenario(args.config)
     evaders = ["random-walk", "greedy", "rash"]
-    learned = [kind for kind in args.kinds if kind in ("bimdn", "image")]
+    learned = [kind for kind in args.kinds if kind in LEARNED_KINDS]
     if learned:
         train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
         valid_x, valid_y, _ = _windows(scenario, evaders, max(args.games // 10, 10), seed=500)

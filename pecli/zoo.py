@@ -10,6 +10,7 @@ Layout of one run::
             ep0000250.zip    a checkpoint every ``checkpoint_every`` episodes (SB3 zip)
             ep0000250.json   its metadata (see :class:`CheckpointMeta`)
             final.zip/.json  the end of training
+            best.zip/.json   with ``eval_every``: the checkpoint of the run's best evaluation so far
             last.zip/.json   where an interrupted run resumes from, with
             replay_buffer.pkl  its replay buffer, and
             belief_fit.pt    a learned belief's own buffer and optimiser

@@ -139,7 +139,7 @@ def test_the_graphs_ukf_and_rasteriser_match_numpys(scenario: Scenario) -> None:
 
 
 def test_the_ukf_belief_stays_in_the_arena(paper: Scenario) -> None:
-    """A sighting's velocity carried on for 15 s leaves the 16 m arena; the belief's mean stops at the wall."""
+    """A sighting's velocity carried on for 16 s leaves the 16 m arena; the belief's mean stops at the wall."""
     codec = ObservationCodec(paper, "pursuer")
     own = np.zeros((7, 20))
     own[5] = 1.0  # at the centre, facing +x: cos psi = 1

@@ -97,7 +97,8 @@ def test_damaged_checkpoints_give_clear_errors(trained: Path, tmp_path: Path, qu
 def test_resume_continues_the_run(trained: Path, monkeypatch) -> None:
     before = json.loads((trained / "run" / "pursuer" / "last.json").read_text())["cpu_seconds"]
     assert before > 0
-    monkeypatch.setattr("pecli.rl.train.time.process_time", lambda: 2.5)  # the resumed process's own CPU time
+    clock = iter([100.0])  # the resumed call starts at 100 CPU-s of its process, then has spent 2.5
+    monkeypatch.setattr("pecli.rl.train.process_cpu_seconds", lambda: next(clock, 102.5))
     result = invoke(["train", "pursuer", "--zoo", str(trained), "--name", "run", "--resume", "--steps", "1500", "-q"])
     assert result.exit_code == 0, result.output
     meta = json.loads((trained / "run" / "pursuer" / "final.json").read_text())

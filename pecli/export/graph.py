@@ -68,7 +68,7 @@ class PolicyGraph(nn.Module):
         self.mu = actor.mu
         belief: BeliefModel | None = getattr(actor.features_extractor, "belief", None)
         self.belief = belief_module(belief) if belief is not None else None
-        self.features_of = belief.features_of if belief is not None else None  # mixture → the actor's features
+        self.frame = belief.frame if belief is not None else None  # belief points → the actor's frame
         self.mixed = belief is not None and belief.kind == "bimdn-mixed"
         self.register_buffer("limits", th.tensor(command_limits(layout), dtype=th.float64), persistent=False)
         half = th.tensor((layout.codec.half_x, layout.codec.half_y), dtype=th.float64)
@@ -98,8 +98,8 @@ class PolicyGraph(nn.Module):
             rows = self.encoder(th.cat([obs, history], dim=1))
             features, window = rows[:, :stack].flatten(1), rows[:, stack:]
             mixture = Mixture(*self.belief(window))
-            draws = (uniform, normal) if self.mixed else None
-            features = th.cat([features, self.features_of(mixture, window[:, -1], draws)], dim=1)
+            points = mixture.sample_with(uniform, normal) if self.mixed else mixture.mean()  # as BeliefModel.features_of
+            features = th.cat([features, self.frame(points, window[:, -1]).flatten(1)], dim=1)
             beliefs = (mixture.weights, mixture.means.double() * self.arena_half, mixture.stds.double() * self.arena_half)
         action = self.mu(features)
         return (action.double() * self.limits, action, *beliefs)

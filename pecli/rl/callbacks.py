@@ -164,8 +164,8 @@ class Evaluation(BaseCallback):
         self._next = (self.num_timesteps // self.every + 1) * self.every
         if self.csv_path.exists():  # a resumed run: its best so far is in its log
             with self.csv_path.open(newline="") as handle:
-                rates = [float(row["capture_rate"]) for row in csv.DictReader(handle)]
-            self.best = max((self.sign * rate for rate in rates), default=-math.inf)
+                rates = [_number(row.get("capture_rate")) for row in csv.DictReader(handle)]
+            self.best = max((self.sign * rate for rate in rates if rate is not None), default=-math.inf)
         else:
             with self.csv_path.open("w", newline="") as handle:
                 csv.writer(handle).writerow(["steps", "cpu_seconds", "wall_seconds", "capture_rate"])
@@ -184,8 +184,8 @@ class Evaluation(BaseCallback):
             csv.writer(handle).writerow(
                 [self.num_timesteps, f"{self.clock():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
             )
-        if self.sign * rate > self.best:
-            self.best = self.sign * rate
+        if self.sign * round(rate, 4) > self.best:  # as logged, so a resumed run's tie is no new best
+            self.best = self.sign * round(rate, 4)
             if self.on_best is not None:
                 self.on_best(rate)
         return rate
@@ -291,3 +291,11 @@ class RoundDisplay(BaseCallback):
         if self.live is not None:
             self.live.stop()
             self.live = None
+
+
+def _number(text: str | None) -> float | None:
+    """``text`` as a float; ``None`` for a missing or half-written value."""
+    try:
+        return float(text) if text else None
+    except ValueError:
+        return None

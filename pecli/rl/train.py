@@ -198,6 +198,11 @@ def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     return evaluate
 
 
+def process_cpu_seconds() -> float:
+    """CPU time of this process (all threads), s: what a run's ``cpu_seconds`` count."""
+    return time.process_time()
+
+
 def resume_seed(seed: int, steps: int) -> int:
     """The seed a run resumed at ``steps`` continues with: new start states and noise, still reproducible."""
     return int(np.random.SeedSequence([seed, steps]).generate_state(1)[0] % 2**31)
@@ -208,6 +213,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
 
     Ctrl-C saves ``last`` with the replay buffer and raises :class:`TrainingInterrupted`.
     """
+    cpu_start = process_cpu_seconds()
     t = job.scenario.training
     th.set_num_threads(t.torch_threads)
     opponent = resolve_policy(job.opponent, opponent_of(job.role), job.scenario, seed=job.seed)
@@ -236,8 +242,8 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     if on_start is not None:
         on_start(run)
 
-    def cpu_seconds() -> float:  # the run's CPU time: the stopped processes' (from the checkpoint) and this one's
-        return cpu_before + time.process_time()
+    def cpu_seconds() -> float:  # the run's CPU time: the stopped processes' (from the checkpoint) and this call's
+        return cpu_before + process_cpu_seconds() - cpu_start
 
     def meta_now(episodes: int) -> CheckpointMeta:
         return checkpoint_meta(job, model, episodes, cpu_seconds())

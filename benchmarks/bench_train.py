@@ -13,7 +13,8 @@ reports learner transitions per second of each and their ratio, median of ``--re
 ``curves`` runs ``pecli train pursuer`` for each seed with a budget of ``--max-steps``
 transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluation against the
 greedy evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
-``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine. Each run
+``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine.
+``--resume`` continues stopped runs until they have used ``--minutes`` in all. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
 takes each seed's best evaluation within each budget of ``--at`` (default 10 and 30 CPU-minutes),
 prints their medians, and draws ``docs/learning_curves_<belief>.png``. ``--belief`` picks the
@@ -104,11 +105,13 @@ def curves(args: argparse.Namespace) -> None:
         while pending and len(running) < args.jobs:
             seed = pending.pop(0)
             name = f"{args.config}-{args.belief}-s{seed}"
-            command = [
-                sys.executable, "-m", "pecli", "train", "pursuer", "-c", args.config, "--zoo", str(CURVES),
-                "--name", name, "--seed", str(seed), "--steps", str(args.max_steps), "-q", "--belief", args.belief,
-                "--set", f"eval_every={args.eval_every}", *sum((["--set", s] for s in args.set), []),
-            ]
+            command = [sys.executable, "-m", "pecli", "train", "pursuer", "--zoo", str(CURVES), "--name", name, "-q"]
+            if args.resume:  # the run's own settings and budget; its CPU time continues from its checkpoint
+                command += ["--resume"]
+            else:
+                command += ["-c", args.config, "--seed", str(seed), "--steps", str(args.max_steps),
+                            "--belief", args.belief, "--set", f"eval_every={args.eval_every}",
+                            *sum((["--set", s] for s in args.set), [])]
             print("started:", " ".join(command[1:]), flush=True)
             running.append((seed, subprocess.Popen(command, cwd=ROOT)))
         time.sleep(5)
@@ -189,6 +192,8 @@ def main() -> None:
     c.add_argument("--max-steps", type=int, default=600_000,
                    help="the training budget; the curriculum spans its first 30 %% (paper.yaml)")
     c.add_argument("--set", action="append", default=[], help="extra training settings, KEY=VALUE")
+    c.add_argument("--resume", action="store_true",
+                   help="continue stopped runs (pecli train --resume) until --minutes of their CPU time in all")
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")
     r.add_argument("--belief", default="none")

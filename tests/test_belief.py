@@ -175,6 +175,18 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
     assert "evader" not in recording.beliefs  # the greedy evader has no belief
     assert draw_episodes(recording, tmp_path / "beliefs.png").stat().st_size > 1000
 
+    # a zip written before beliefs had a frame: SB3 rebuilds the extractor without it, in the world frame
+    from stable_baselines3 import TD3
+
+    kwargs = TD3.load(final, device="cpu").policy_kwargs
+    old = {**kwargs, "features_extractor_kwargs": {"belief": {
+        key: value for key, value in kwargs["features_extractor_kwargs"]["belief"].items() if key != "frame"}}}
+    loaded = TD3.load(final, custom_objects={"policy_kwargs": old}, device="cpu")
+    belief = loaded.policy.actor.features_extractor.belief
+    assert belief.frame.frame == "world"
+    history = th.randn(3, belief.window[0] * belief.window[1])
+    th.testing.assert_close(belief.features(history), belief.mixture(history).mean())
+
 
 @pytest.mark.parametrize("role", ["pursuer", "evader"])
 @pytest.mark.parametrize("config", ["paper", "car_vs_car"])

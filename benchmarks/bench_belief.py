@@ -19,6 +19,9 @@ over all unseen moments and split by whether the window holds a sighting.
 (c) reads the curve runs of ``bench_train.py curves --belief KIND`` and, for each, takes the
 newest checkpoint the run had written within ``--minutes`` of CPU time (the run's evaluation log
 maps CPU time to steps), then plays it against the greedy and rash evaders (500 episodes, seed 0).
+With ``--shuffled`` it plays each belief checkpoint once more with its belief features permuted
+across the batch's games at every step: same distribution, but no longer about the actor's own
+game. The capture lost is what the actor takes from its belief.
 """
 
 from __future__ import annotations
@@ -207,6 +210,18 @@ def _checkpoint_within(run: Path, minutes: float) -> tuple[Path, float] | None:
     return None if best is None else (best[0], used * best[1] / max(steps, 1))
 
 
+def _shuffle_belief(policy, seed: int = 0) -> None:
+    """Make a learned player's belief features those of another game of the batch, at every step."""
+    belief = policy.actor.features_extractor.belief
+    own, generator = belief.features, th.Generator().manual_seed(seed)
+
+    def shuffled(history: th.Tensor, draws=None) -> th.Tensor:
+        features = own(history, draws)
+        return features[th.randperm(features.shape[0], generator=generator)]
+
+    belief.features = shuffled
+
+
 def capture(args: argparse.Namespace) -> None:
     from pecli.match import play_match
     from pecli.policies import resolve_policy
@@ -215,8 +230,9 @@ def capture(args: argparse.Namespace) -> None:
     scenario = load_scenario(args.config)
     curves = ROOT / "runs" / "bench_train"
     print(f"checkpoints within {args.minutes:g} CPU-minutes of training, 500 episodes each, seed 0")
-    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |")
-    print("| --- | ---: | --- | ---: | ---: | ---: |")
+    shuffled = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
+    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |" + shuffled)
+    print("| --- | ---: | --- | ---: | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
     summary: dict[str, list[tuple[float, float]]] = {}
     for kind in args.kinds:
         for run in sorted(curves.glob(f"{args.config}-{kind}-s*")):
@@ -225,17 +241,23 @@ def capture(args: argparse.Namespace) -> None:
                 continue
             checkpoint, minutes = found
             rates = []
-            for evader in ("greedy", "rash"):
-                result, _ = play_match(scenario, resolve_policy(str(checkpoint), "pursuer", scenario),
-                                       resolve_policy(evader, "evader", scenario), episodes=500, seed=0)
-                rates.append(result.capture_rate)
-            summary.setdefault(kind, []).append((rates[0], rates[1]))
+            for shuffled in (False, True) if args.shuffled and kind != "none" else (False,):
+                for evader in ("greedy", "rash"):
+                    pursuer = resolve_policy(str(checkpoint), "pursuer", scenario)
+                    if shuffled:
+                        _shuffle_belief(pursuer)
+                    result, _ = play_match(scenario, pursuer, resolve_policy(evader, "evader", scenario),
+                                           episodes=500, seed=0)
+                    rates.append(result.capture_rate)
+            summary.setdefault(kind, []).append(tuple(rates))
             seed = run.name.rsplit("-s", 1)[1]
-            print(f"| {kind} | {seed} | {checkpoint.stem} | {minutes:.1f} | {rates[0]:.3f} | {rates[1]:.3f} |")
+            print(f"| {kind} | {seed} | {checkpoint.stem} | {minutes:.1f} | " + " | ".join(f"{r:.3f}" for r in rates) + " |")
     for kind, values in summary.items():
-        greedy = statistics.median(v[0] for v in values)
-        rash = statistics.median(v[1] for v in values)
-        print(f"median {kind}: greedy {greedy:.3f}, rash {rash:.3f} ({len(values)} seeds)")
+        medians = [statistics.median(v[i] for v in values) for i in range(len(values[0]))]
+        line = f"median {kind}: greedy {medians[0]:.3f}, rash {medians[1]:.3f}"
+        if len(medians) == 4:
+            line += f"; shuffled belief: greedy {medians[2]:.3f}, rash {medians[3]:.3f}"
+        print(f"{line} ({len(values)} seeds)")
 
 
 def main() -> None:
@@ -258,6 +280,8 @@ def main() -> None:
     c.add_argument("--config", default="paper")
     c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])
     c.add_argument("--minutes", type=float, default=10.0)
+    c.add_argument("--shuffled", action="store_true",
+                   help="also play each belief checkpoint with its features permuted across games")
     args = parser.parse_args()
     th.set_num_threads(1)
     {"speed": speed, "quality": quality, "capture": capture}[args.step](args)

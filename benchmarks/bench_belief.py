@@ -31,6 +31,7 @@ import os
 import statistics
 import time
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -210,12 +211,12 @@ def _checkpoint_within(run: Path, minutes: float) -> tuple[Path, float] | None:
     return None if best is None else (best[0], used * best[1] / max(steps, 1))
 
 
-def _shuffle_belief(policy, seed: int = 0) -> None:
+def _shuffle_belief(policy: Any, seed: int = 0) -> None:
     """Make a learned player's belief features those of another game of the batch, at every step."""
     belief = policy.actor.features_extractor.belief
     own, generator = belief.features, th.Generator().manual_seed(seed)
 
-    def shuffled(history: th.Tensor, draws=None) -> th.Tensor:
+    def shuffled(history: th.Tensor, draws: tuple[th.Tensor, th.Tensor] | None = None) -> th.Tensor:
         features = own(history, draws)
         return features[th.randperm(features.shape[0], generator=generator)]
 
@@ -233,7 +234,7 @@ def capture(args: argparse.Namespace) -> None:
     shuffled = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
     print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |" + shuffled)
     print("| --- | ---: | --- | ---: | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
-    summary: dict[str, list[tuple[float, float]]] = {}
+    summary: dict[str, list[tuple[float, ...]]] = {}
     for kind in args.kinds:
         for run in sorted(curves.glob(f"{args.config}-{kind}-s*")):
             found = _checkpoint_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else None

@@ -231,8 +231,8 @@ def capture(args: argparse.Namespace) -> None:
     scenario = load_scenario(args.config)
     curves = ROOT / "runs" / "bench_train"
     print(f"checkpoints within {args.minutes:g} CPU-minutes of training, 500 episodes each, seed 0")
-    shuffled = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
-    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |" + shuffled)
+    columns = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
+    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |" + columns)
     print("| --- | ---: | --- | ---: | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
     summary: dict[str, list[tuple[float, ...]]] = {}
     for kind in args.kinds:

@@ -3,6 +3,7 @@
     python benchmarks/bench_belief.py speed      # (a) training transitions/s per belief kind, as a ratio to none
     python benchmarks/bench_belief.py quality    # (b) unseen-position error on held-out games
     python benchmarks/bench_belief.py capture    # (c) capture vs greedy and rash of the curve runs' checkpoints
+    python benchmarks/bench_belief.py selfplay   # (d) self-play runs with and without a belief, against each other
 
 (a) trains the pursuer on the paper scenario with each ``--belief`` for the same number of
 transitions, with learning and belief fitting both active (warm-ups shortened), in one process
@@ -21,14 +22,26 @@ newest checkpoint the run had written within ``--minutes`` of CPU time (the run'
 maps CPU time to steps), then plays it against the greedy and rash evaders (500 episodes, seed 0).
 With ``--shuffled`` it plays each belief checkpoint once more with its belief features permuted
 across the batch's games at every step: same distribution, but no longer about the actor's own
-game. The capture lost is what the actor takes from its belief.
+game. The capture lost is what the actor takes from its belief. With ``--keep K`` it selects the
+paper's way instead (SPEC §4): every checkpoint within the budget is ranked by its capture rate
+against greedy on ``--rank-episodes`` (200) episodes (seed 1, not the test episodes), and the best K are tested
+and pooled per seed.
+
+(d) reads the self-play runs of ``pecli selfplay --belief KIND`` (named
+``<config>-<opponents>-<kind>-s<seed>``, no ``<kind>`` for ``none``) and plays the round-``--round``
+pursuer of each run against the same round's evader of every run and against the greedy and
+random-walk evaders (500 episodes, seed 0): medians over seeds, and each kind's pooled captures
+against those of ``none`` with a two-proportion z-test. Results are cached in the zoo's
+``belief-cross.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -40,6 +53,7 @@ import torch as th  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 KINDS = ("none", "bimdn", "bimdn-mixed", "ukf", "image")
+TEST_EPISODES = 500
 
 
 def speed(args: argparse.Namespace) -> None:
@@ -192,23 +206,72 @@ def quality(args: argparse.Namespace) -> None:
         print(f"| {kind} | " + " | ".join(f"{error[mask].mean():.2f}" for mask in groups.values()) + " |")
 
 
-def _checkpoint_within(run: Path, minutes: float) -> tuple[Path, float] | None:
-    """The newest checkpoint of ``run`` written within ``minutes`` of CPU time, and that CPU time."""
+def _checkpoints_within(run: Path, minutes: float) -> list[tuple[Path, float]]:
+    """Every checkpoint of ``run`` written within ``minutes`` of CPU time with that CPU time, oldest first.
+
+    The run's evaluation log maps steps to CPU time; a checkpoint's CPU time is interpolated between
+    its rows. Checkpoints with the same step count hold the same policy: one of them is listed.
+    """
     import csv
 
     from pecli.zoo import read_metadata
 
     rows = list(csv.DictReader((run / "eval_pursuer.csv").open()))
-    budget = [(int(r["steps"]), float(r["cpu_seconds"]) / 60) for r in rows if float(r["cpu_seconds"]) <= 60 * minutes]
-    if not budget:
-        return None
-    steps, used = budget[-1]
-    best = None
-    for path in (run / "pursuer").glob("*.zip"):
+    steps = [0] + [int(r["steps"]) for r in rows]
+    used = [0.0] + [float(r["cpu_seconds"]) / 60 for r in rows]
+    within = max((s for s, m in zip(steps, used) if m <= minutes), default=0)
+    found: dict[int, Path] = {}
+    for path in sorted((run / "pursuer").glob("*.zip")):  # ep*.zip sort before best/final/last
         taken = read_metadata(path).steps
-        if taken <= steps and (best is None or taken > best[1]):
-            best = (path, taken)
-    return None if best is None else (best[0], used * best[1] / max(steps, 1))
+        if 0 < taken <= within:
+            found.setdefault(taken, path)
+    return [(found[taken], float(np.interp(taken, steps, used))) for taken in sorted(found)]
+
+
+def _cached_capture(cache: Path, scenario: Any, pursuer: str, evader: str, episodes: int, seed: int) -> float:
+    """Capture rate of ``pursuer`` vs ``evader`` (specs or checkpoint paths), kept in the JSON file ``cache``.
+
+    A checkpoint's key is its path from the cache's folder and its step count, so a run's ``final``
+    or ``last`` is played again once the run has moved on.
+    """
+    from pecli.io import atomic_write_json
+    from pecli.match import play_match
+    from pecli.policies import resolve_policy
+    from pecli.zoo import read_metadata
+
+    def label(spec: str) -> str:
+        if not spec.endswith(".zip"):
+            return spec
+        path = Path(spec).resolve()
+        inside = path.is_relative_to(cache.parent.resolve())
+        return f"{path.relative_to(cache.parent.resolve()) if inside else path}@{read_metadata(path).steps}"
+
+    key = f"{label(pursuer)} vs {label(evader)}: {episodes} episodes, seed {seed}"
+    results = json.loads(cache.read_text()) if cache.is_file() else {}
+    if key not in results:
+        result, _ = play_match(scenario, resolve_policy(pursuer, "pursuer", scenario),
+                               resolve_policy(evader, "evader", scenario), episodes=episodes, seed=seed)
+        results = json.loads(cache.read_text()) if cache.is_file() else {}  # another process may have added some
+        results[key] = result.capture_rate
+        atomic_write_json(cache, results)
+    return float(results[key])
+
+
+def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep: int, episodes: int,
+                 ) -> list[tuple[Path, float]]:
+    """The ``keep`` checkpoints of ``found`` that capture most against greedy on ranking episodes (seed 1).
+
+    The paper's selection (SPEC §4), against the run's own opponent. The ranking episodes are not
+    the test episodes (seed 0) nor training's evaluations (seed 10 000 + run seed). Results are
+    cached in ``run/ranking.json``, so a second call only plays new checkpoints.
+    """
+    rates = []
+    for number, (path, minutes) in enumerate(found, 1):
+        print(f"  ranking {run.name} {number}/{len(found)}: {path.stem}", file=sys.stderr, flush=True)
+        rate = _cached_capture(run / "ranking.json", scenario, str(path), "greedy", episodes, seed=1)
+        rates.append((rate, minutes, path))
+    ranked = sorted(rates, key=lambda r: (-r[0], -r[1]))  # ties: the later checkpoint
+    return sorted(((path, minutes) for _, minutes, path in ranked[:keep]), key=lambda c: c[1])
 
 
 def _shuffle_belief(policy: Any, seed: int = 0) -> None:
@@ -223,42 +286,110 @@ def _shuffle_belief(policy: Any, seed: int = 0) -> None:
     belief.features = shuffled
 
 
-def capture(args: argparse.Namespace) -> None:
+def _captures(checkpoint: Path, scenario: Any, shuffled_too: bool) -> list[int]:
+    """Captures in 500 test episodes (seed 0) vs greedy and rash, then the same with shuffled beliefs."""
     from pecli.match import play_match
     from pecli.policies import resolve_policy
+
+    counts = []
+    for shuffled in (False, True) if shuffled_too else (False,):
+        for evader in ("greedy", "rash"):
+            pursuer = resolve_policy(str(checkpoint), "pursuer", scenario)
+            if shuffled:
+                _shuffle_belief(pursuer)
+            result, _ = play_match(scenario, pursuer, resolve_policy(evader, "evader", scenario),
+                                   episodes=TEST_EPISODES, seed=0)
+            counts.append(int(result.captured.sum()))
+    return counts
+
+
+def capture(args: argparse.Namespace) -> None:
     from pecli.scenario import load_scenario
+    from pecli.stats import two_proportion_z_test
 
     scenario = load_scenario(args.config)
     curves = ROOT / "runs" / "bench_train"
-    print(f"checkpoints within {args.minutes:g} CPU-minutes of training, 500 episodes each, seed 0")
+    chosen_by = (f"the best {args.keep} by capture vs greedy ({args.rank_episodes} ranking episodes, seed 1), pooled"
+                 if args.keep else "the newest")
+    print(f"checkpoints within {args.minutes:g} CPU-minutes of training: {chosen_by}; "
+          f"{TEST_EPISODES} test episodes each, seed 0")
     columns = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
-    print("| belief | seed | checkpoint | ~CPU min | vs greedy | vs rash |" + columns)
-    print("| --- | ---: | --- | ---: | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
-    summary: dict[str, list[tuple[float, ...]]] = {}
+    print("| belief | seed | checkpoint (~CPU min) | vs greedy | vs rash |" + columns)
+    print("| --- | ---: | --- | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
+    summary: dict[str, list[tuple[np.ndarray, int]]] = {}
     for kind in args.kinds:
-        for run in sorted(curves.glob(f"{args.config}-{kind}-s*")):
-            found = _checkpoint_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else None
-            if found is None:
+        for seed in args.seeds:
+            run = curves / f"{args.config}-{kind}-s{seed}"
+            found = _checkpoints_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else []
+            if not found:
                 continue
-            checkpoint, minutes = found
-            rates = []
-            for shuffled in (False, True) if args.shuffled and kind != "none" else (False,):
-                for evader in ("greedy", "rash"):
-                    pursuer = resolve_policy(str(checkpoint), "pursuer", scenario)
-                    if shuffled:
-                        _shuffle_belief(pursuer)
-                    result, _ = play_match(scenario, pursuer, resolve_policy(evader, "evader", scenario),
-                                           episodes=500, seed=0)
-                    rates.append(result.capture_rate)
-            summary.setdefault(kind, []).append(tuple(rates))
-            seed = run.name.rsplit("-s", 1)[1]
-            print(f"| {kind} | {seed} | {checkpoint.stem} | {minutes:.1f} | " + " | ".join(f"{r:.3f}" for r in rates) + " |")
+            chosen = _best_ranked(run, found, scenario, args.keep, args.rank_episodes) if args.keep else found[-1:]
+            shuffled_too = args.shuffled and kind != "none"
+            counts = np.sum([_captures(path, scenario, shuffled_too) for path, _ in chosen], axis=0)
+            episodes = TEST_EPISODES * len(chosen)
+            summary.setdefault(kind, []).append((counts, episodes))
+            names = ", ".join(f"{path.stem} ({minutes:.1f})" for path, minutes in chosen)
+            print(f"| {kind} | {seed} | {names} | " + " | ".join(f"{c / episodes:.3f}" for c in counts) + " |")
+    pooled = {kind: (sum(c[0] for c, _ in values), sum(n for _, n in values)) for kind, values in summary.items()}
     for kind, values in summary.items():
-        medians = [statistics.median(v[i] for v in values) for i in range(len(values[0]))]
+        medians = [statistics.median(c[i] / n for c, n in values) for i in range(len(values[0][0]))]
         line = f"median {kind}: greedy {medians[0]:.3f}, rash {medians[1]:.3f}"
         if len(medians) == 4:
             line += f"; shuffled belief: greedy {medians[2]:.3f}, rash {medians[3]:.3f}"
-        print(f"{line} ({len(values)} seeds)")
+        captured, episodes = pooled[kind]
+        line += f" ({len(values)} seeds); pooled vs greedy {captured / episodes:.3f} of {episodes}"
+        if kind != "none" and "none" in pooled:
+            line += f", p = {two_proportion_z_test(captured, episodes, *pooled['none']):.2g} against none"
+        print(line)
+
+
+def selfplay(args: argparse.Namespace) -> None:
+    from pecli.scenario import load_scenario
+    from pecli.stats import two_proportion_z_test
+
+    scenario = load_scenario(args.config)
+    checkpoint = f"round-{args.round:03d}.zip"
+    runs: dict[str, dict[int, Path]] = {}
+    for kind in args.kinds:
+        infix = "" if kind == "none" else f"{kind}-"
+        for seed in args.seeds:
+            run = args.zoo / f"{args.config}-{args.opponents}-{infix}s{seed}"
+            if all((run / role / checkpoint).is_file() for role in ("pursuer", "evader")):
+                runs.setdefault(kind, {})[seed] = run
+    if not runs:
+        raise SystemExit(f"no self-play run in {args.zoo} has reached round {args.round}")
+    evaders = {f"{kind}-sp": [str(run / "evader" / checkpoint) for run in found.values()] for kind, found in runs.items()}
+    evaders |= {name: [name] for name in ("greedy", "random-walk")}
+    print(f"round {args.round} pursuers of self-play ({args.opponents}) against the round-{args.round} evaders of "
+          f"every run and two heuristics; {TEST_EPISODES} episodes per pairing, seed 0")
+    print("| pursuer | seed | " + " | ".join(f"vs {name}" for name in evaders) + " |")
+    print("| --- | ---: |" + " ---: |" * len(evaders))
+    captures: dict[str, list[list[float]]] = {}
+    for kind, found in runs.items():
+        for seed, run in found.items():
+            rates = [statistics.mean(_cached_capture(args.zoo / "belief-cross.json", scenario,
+                                                     str(run / "pursuer" / checkpoint), evader, TEST_EPISODES, 0)
+                                     for evader in group) for group in evaders.values()]
+            captures.setdefault(kind, []).append(rates)
+            print(f"| {kind}-sp | {seed} | " + " | ".join(f"{r:.3f}" for r in rates) + " |", flush=True)
+    for kind, rows in captures.items():
+        medians = [statistics.median(column) for column in zip(*rows)]
+        print(f"median {kind}-sp ({len(rows)} seeds): " + ", ".join(
+            f"vs {name} {m:.3f}" for name, m in zip(evaders, medians)))
+    for kind in (k for k in captures if k != "none" and "none" in captures):
+        for column, (name, group) in enumerate(evaders.items()):
+            ours, theirs = (_pooled(captures[k], column, TEST_EPISODES * len(group)) for k in (kind, "none"))
+            print(f"pooled vs {name}: {kind}-sp {_ratio(*ours)}, none-sp {_ratio(*theirs)}, "
+                  f"p = {two_proportion_z_test(*ours, *theirs):.2g}")
+
+
+def _pooled(rows: list[list[float]], column: int, episodes: int) -> tuple[int, int]:
+    """(captures, episodes) of one column of capture rates, each over ``episodes``."""
+    return sum(round(row[column] * episodes) for row in rows), episodes * len(rows)
+
+
+def _ratio(successes: int, trials: int) -> str:
+    return f"{successes / trials:.3f} of {trials}"
 
 
 def main() -> None:
@@ -280,12 +411,23 @@ def main() -> None:
     c = sub.add_parser("capture")
     c.add_argument("--config", default="paper")
     c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])
+    c.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     c.add_argument("--minutes", type=float, default=10.0)
     c.add_argument("--shuffled", action="store_true",
                    help="also play each belief checkpoint with its features permuted across games")
+    c.add_argument("--keep", type=int, default=0,
+                   help="the paper's selection: rank every checkpoint within the budget, test the best KEEP")
+    c.add_argument("--rank-episodes", type=int, default=200, help="episodes per checkpoint in the ranking")
+    d = sub.add_parser("selfplay")
+    d.add_argument("--config", default="paper")
+    d.add_argument("--zoo", type=Path, default=ROOT / "runs" / "bench_selfplay")
+    d.add_argument("--opponents", default="pfsp")
+    d.add_argument("--kinds", nargs="+", default=["none", "bimdn"])
+    d.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    d.add_argument("--round", type=int, default=8, help="the generation of every run to play")
     args = parser.parse_args()
     th.set_num_threads(1)
-    {"speed": speed, "quality": quality, "capture": capture}[args.step](args)
+    {"speed": speed, "quality": quality, "capture": capture, "selfplay": selfplay}[args.step](args)
 
 
 if __name__ == "__main__":

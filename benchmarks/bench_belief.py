@@ -32,13 +32,12 @@ and pooled per seed.
 pursuer of each run against the same round's evader of every run and against the greedy and
 random-walk evaders (500 episodes, seed 0): medians over seeds, and each kind's pooled captures
 against those of ``none`` with a two-proportion z-test. Results are cached in the zoo's
-``belief-cross.json``.
+``belief-cross`` (a ``pecli tournament``'s pairing cache).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -228,50 +227,43 @@ def _checkpoints_within(run: Path, minutes: float) -> list[tuple[Path, float]]:
     return [(found[taken], float(np.interp(taken, steps, used))) for taken in sorted(found)]
 
 
-def _cached_capture(cache: Path, scenario: Any, pursuer: str, evader: str, episodes: int, seed: int) -> float:
-    """Capture rate of ``pursuer`` vs ``evader`` (specs or checkpoint paths), kept in the JSON file ``cache``.
+def _capture_rates(scenario: Any, pursuers: list[str], evaders: list[str], episodes: int, seed: int, out: Path,
+                   workers: int = 1) -> dict[tuple[str, str], Any]:
+    """Every pursuer against every evader (checkpoint paths or policy names): ``PairingResult`` keyed by
+    ``(_spec(pursuer), _spec(evader))``, from a ``pecli tournament`` whose pairings are cached in ``out``."""
+    from pecli.tournament import find_players, run_tournament
 
-    A checkpoint's key is its path from the cache's folder and its step count, so a run's ``final``
-    or ``last`` is played again once the run has moved on.
-    """
-    from pecli.io import atomic_write_json
-    from pecli.match import play_match
-    from pecli.policies import resolve_policy
-    from pecli.zoo import read_metadata
+    found = find_players([*pursuers, *evaders], scenario, baselines=True).players  # baselines: the heuristics' roles
+    wanted = {"pursuer": {_spec(p) for p in pursuers}, "evader": {_spec(e) for e in evaders}}
+    players = {role: [p for p in found[role] if p.spec in wanted[role]] for role in found}
+    pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
+    played = iter(range(1, len(pairings) + 1))
 
-    def label(spec: str) -> str:
-        if not spec.endswith(".zip"):
-            return spec
-        path = Path(spec).resolve()
-        inside = path.is_relative_to(cache.parent.resolve())
-        return f"{path.relative_to(cache.parent.resolve()) if inside else path}@{read_metadata(path).steps}"
+    def report(result: Any, cached: bool) -> None:
+        if not cached:
+            print(f"  {next(played)}: {result.pursuer} vs {result.evader}", file=sys.stderr, flush=True)
 
-    key = f"{label(pursuer)} vs {label(evader)}: {episodes} episodes, seed {seed}"
-    results = json.loads(cache.read_text()) if cache.is_file() else {}
-    if key not in results:
-        result, _ = play_match(scenario, resolve_policy(pursuer, "pursuer", scenario),
-                               resolve_policy(evader, "evader", scenario), episodes=episodes, seed=seed)
-        results = json.loads(cache.read_text()) if cache.is_file() else {}  # another process may have added some
-        results[key] = result.capture_rate
-        atomic_write_json(cache, results)
-    return float(results[key])
+    grid = run_tournament(scenario, players, pairings, episodes, [seed], out, workers, report).grid()
+    return {(p.spec, e.spec): grid[(p.name, e.name)] for p, e in pairings}
 
 
-def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep: int, episodes: int,
+def _spec(policy: str | Path) -> str:
+    """How the tournament names a policy: a checkpoint by its resolved path, anything else as given."""
+    return str(Path(policy).resolve()) if str(policy).endswith(".zip") else str(policy)
+
+
+def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep: int, episodes: int, workers: int,
                  ) -> list[tuple[Path, float]]:
     """The ``keep`` checkpoints of ``found`` that capture most against greedy on ranking episodes (seed 1).
 
     The paper's selection (SPEC §4), against the run's own opponent. The ranking episodes are not
-    the test episodes (seed 0) nor training's evaluations (seed 10 000 + run seed). Results are
-    cached in ``run/ranking.json``, so a second call only plays new checkpoints.
+    the test episodes (seed 0) nor training's evaluations (seed 10 000 + run seed). The pairings are
+    cached in ``run/ranking``, so a second call only plays new checkpoints.
     """
-    rates = []
-    for number, (path, minutes) in enumerate(found, 1):
-        print(f"  ranking {run.name} {number}/{len(found)}: {path.stem}", file=sys.stderr, flush=True)
-        rate = _cached_capture(run / "ranking.json", scenario, str(path), "greedy", episodes, seed=1)
-        rates.append((rate, minutes, path))
-    ranked = sorted(rates, key=lambda r: (-r[0], -r[1]))  # ties: the later checkpoint
-    return sorted(((path, minutes) for _, minutes, path in ranked[:keep]), key=lambda c: c[1])
+    print(f"ranking {len(found)} checkpoints of {run.name}", file=sys.stderr, flush=True)
+    rates = _capture_rates(scenario, [str(path) for path, _ in found], ["greedy"], episodes, 1, run / "ranking", workers)
+    ranked = sorted(found, key=lambda c: (-rates[(_spec(c[0]), "greedy")].capture_rate, -c[1]))  # ties: the later checkpoint
+    return sorted(ranked[:keep], key=lambda c: c[1])
 
 
 def _shuffle_belief(policy: Any, seed: int = 0) -> None:
@@ -323,7 +315,7 @@ def capture(args: argparse.Namespace) -> None:
             found = _checkpoints_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else []
             if not found:
                 continue
-            chosen = _best_ranked(run, found, scenario, args.keep, args.rank_episodes) if args.keep else found[-1:]
+            chosen = _best_ranked(run, found, scenario, args.keep, args.rank_episodes, args.workers) if args.keep else found[-1:]
             shuffled_too = args.shuffled and kind != "none"
             counts = np.sum([_captures(path, scenario, shuffled_too) for path, _ in chosen], axis=0)
             episodes = TEST_EPISODES * len(chosen)
@@ -364,28 +356,26 @@ def selfplay(args: argparse.Namespace) -> None:
           f"every run and two heuristics; {TEST_EPISODES} episodes per pairing, seed 0")
     print("| pursuer | seed | " + " | ".join(f"vs {name}" for name in evaders) + " |")
     print("| --- | ---: |" + " ---: |" * len(evaders))
-    captures: dict[str, list[list[float]]] = {}
+    pursuers = [str(run / "pursuer" / checkpoint) for found in runs.values() for run in found.values()]
+    results = _capture_rates(scenario, pursuers, sum(evaders.values(), []), TEST_EPISODES, 0,
+                             args.zoo / "belief-cross", args.workers)
+    captures: dict[str, list[list[tuple[int, int]]]] = {}  # kind → per seed, per evader group: (captures, episodes)
     for kind, found in runs.items():
         for seed, run in found.items():
-            rates = [statistics.mean(_cached_capture(args.zoo / "belief-cross.json", scenario,
-                                                     str(run / "pursuer" / checkpoint), evader, TEST_EPISODES, 0)
-                                     for evader in group) for group in evaders.values()]
-            captures.setdefault(kind, []).append(rates)
-            print(f"| {kind}-sp | {seed} | " + " | ".join(f"{r:.3f}" for r in rates) + " |", flush=True)
+            pursuer = _spec(run / "pursuer" / checkpoint)
+            row = [(sum(results[(pursuer, _spec(e))].captures for e in group),
+                    sum(results[(pursuer, _spec(e))].episodes for e in group)) for group in evaders.values()]
+            captures.setdefault(kind, []).append(row)
+            print(f"| {kind}-sp | {seed} | " + " | ".join(f"{c / n:.3f}" for c, n in row) + " |")
     for kind, rows in captures.items():
-        medians = [statistics.median(column) for column in zip(*rows)]
+        medians = [statistics.median(c / n for c, n in column) for column in zip(*rows)]
         print(f"median {kind}-sp ({len(rows)} seeds): " + ", ".join(
             f"vs {name} {m:.3f}" for name, m in zip(evaders, medians)))
     for kind in (k for k in captures if k != "none" and "none" in captures):
-        for column, (name, group) in enumerate(evaders.items()):
-            ours, theirs = (_pooled(captures[k], column, TEST_EPISODES * len(group)) for k in (kind, "none"))
+        for name, ours, theirs in zip(evaders, zip(*captures[kind]), zip(*captures["none"])):
+            ours, theirs = (tuple(map(sum, zip(*column))) for column in (ours, theirs))  # pooled over seeds
             print(f"pooled vs {name}: {kind}-sp {_ratio(*ours)}, none-sp {_ratio(*theirs)}, "
                   f"p = {two_proportion_z_test(*ours, *theirs):.2g}")
-
-
-def _pooled(rows: list[list[float]], column: int, episodes: int) -> tuple[int, int]:
-    """(captures, episodes) of one column of capture rates, each over ``episodes``."""
-    return sum(round(row[column] * episodes) for row in rows), episodes * len(rows)
 
 
 def _ratio(successes: int, trials: int) -> str:
@@ -418,6 +408,7 @@ def main() -> None:
     c.add_argument("--keep", type=int, default=0,
                    help="the paper's selection: rank every checkpoint within the budget, test the best KEEP")
     c.add_argument("--rank-episodes", type=int, default=200, help="episodes per checkpoint in the ranking")
+    c.add_argument("--workers", type=int, default=1, help="processes for the ranking")
     d = sub.add_parser("selfplay")
     d.add_argument("--config", default="paper")
     d.add_argument("--zoo", type=Path, default=ROOT / "runs" / "bench_selfplay")
@@ -425,6 +416,7 @@ def main() -> None:
     d.add_argument("--kinds", nargs="+", default=["none", "bimdn"])
     d.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     d.add_argument("--round", type=int, default=8, help="the generation of every run to play")
+    d.add_argument("--workers", type=int, default=1)
     args = parser.parse_args()
     th.set_num_threads(1)
     {"speed": speed, "quality": quality, "capture": capture, "selfplay": selfplay}[args.step](args)

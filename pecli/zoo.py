@@ -55,7 +55,7 @@ class CheckpointMeta:
     role: Role
     steps: int  # learner transitions trained on
     episodes: int  # episodes finished while training
-    algo: str  # td3 | ddpg
+    algo: str  # a name of pecli.rl.algorithms.ALGORITHMS: td3 | ddpg | ...
     belief: str  # none | bimdn | ...
     scenario: str  # scenario name
     scenario_hash: str  # Scenario.fingerprint(): a checkpoint only plays the game it learned
@@ -71,6 +71,7 @@ class CheckpointMeta:
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.rl.algorithms.policy_kwargs: rebuilds the network
     pecli_version: str = __version__
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 

@@ -7,7 +7,6 @@ this module runs the actor (belief network included) at each decision.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch as th
@@ -17,16 +16,6 @@ from pecli.policies.windowed import Draws, WindowedPolicy
 from pecli.roles import Role
 from pecli.scenario import Scenario
 from pecli.zoo import CheckpointMeta, ZooError, read_metadata
-
-
-def algorithm_class(algo: str) -> Any:
-    """The SB3 algorithm class of ``algo`` (``td3`` or ``ddpg``)."""
-    from stable_baselines3 import DDPG, TD3
-
-    classes = {"td3": TD3, "ddpg": DDPG}
-    if algo not in classes:
-        raise PolicyError(f"unknown algorithm '{algo}' (known: {', '.join(classes)})")
-    return classes[algo]
 
 
 class LearnedPolicy(WindowedPolicy):
@@ -74,7 +63,9 @@ class LearnedPolicy(WindowedPolicy):
                 f"'{scenario.name}' ({scenario.fingerprint()}): pass the config it was trained with"
             )
         try:
-            model = algorithm_class(meta.algo).load(path, device="cpu")
+            from pecli.rl.algorithms import get_algorithm
+
+            model = get_algorithm(meta.algo).cls.load(path, device="cpu")
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
             raise PolicyError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
         return cls(model.policy.actor, role, scenario, meta, seed=seed)

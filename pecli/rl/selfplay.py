@@ -37,9 +37,9 @@ from pecli.errors import PecliError
 from pecli.io import atomic_write_json
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
-from pecli.policies.learned import algorithm_class
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
+from pecli.rl.algorithms import get_algorithm
 from pecli.rl.belief import BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
@@ -171,7 +171,7 @@ class Learner:
         else:
             path = run.path / latest.checkpoint
             try:
-                self.model = algorithm_class(t.algo).load(path, env=self.env, device="cpu",
+                self.model = get_algorithm(t.algo).cls.load(path, env=self.env, device="cpu",
                                                           tensorboard_log=str(run.path / "tb"))
             except Exception as exc:  # a damaged zip: SB3 raises many kinds
                 raise PecliError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None

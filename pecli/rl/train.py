@@ -17,17 +17,16 @@ import numpy as np
 import torch as th
 import yaml
 from stable_baselines3.common.callbacks import CallbackList
-from stable_baselines3.common.noise import NormalActionNoise
 
 from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
-from pecli.policies.learned import LearnedPolicy, algorithm_class
+from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.policies import CentralCriticPolicy
+from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata
@@ -121,6 +120,7 @@ def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float
         run=job.name,
         seed=job.seed,
         cpu_seconds=None if cpu_seconds is None else round(cpu_seconds, 2),
+        policy_kwargs=policy_kwargs(t),
     )
 
 
@@ -159,11 +159,12 @@ def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | 
 def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorboard: Path | None) -> Any:
     """A fresh SB3 model with the paper's hyperparameters from the scenario's training section."""
     t = job.scenario.training
-    policy_kwargs: dict[str, Any] = {"net_arch": list(t.net_arch)}
+    algorithm = get_algorithm(t.algo)
+    kwargs: dict[str, Any] = policy_kwargs(t)
     if t.belief != "none":
-        policy_kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
-    return algorithm_class(t.algo)(
-        CentralCriticPolicy,
+        kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
+    return algorithm.cls(
+        algorithm.policy,
         env,
         learning_rate=t.learning_rate,
         buffer_size=t.buffer_size,
@@ -173,12 +174,12 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
         gamma=t.gamma,
         train_freq=(t.train_freq, "step"),
         gradient_steps=t.gradient_steps,
-        action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
-        policy_kwargs=policy_kwargs,
+        policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
         seed=job.seed,
         device="cpu",
         verbose=0,
+        **algorithm_kwargs(t),
     )
 
 
@@ -225,7 +226,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         meta = read_metadata(last)
         seed = resume_seed(job.seed, meta.steps)
         env = make_env(job, opponent, seed)
-        model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
+        model = get_algorithm(t.algo).cls.load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
         run.log_command()
         episodes, cpu_before = meta.episodes, meta.cpu_seconds or 0.0

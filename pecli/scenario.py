@@ -188,10 +188,13 @@ class SelfPlay(_Model):
     )
 
 
-class Training(_Model):
-    """How a learner is trained (Stable-Baselines3 TD3/DDPG on a frozen-opponent view)."""
+ALGOS = ("td3", "ddpg", "sac", "tqc", "crossq")  # the algorithms of pecli.rl.algorithms
 
-    algo: Literal["td3", "ddpg"] = "td3"
+
+class Training(_Model):
+    """How a learner is trained (Stable-Baselines3 / sb3-contrib off-policy algorithms on a frozen-opponent view)."""
+
+    algo: Literal[ALGOS] = Field(default="td3", description="td3, ddpg, sac, tqc or crossq")  # type: ignore[valid-type]
     belief: Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"] = Field(
         default="none", description="what the actor adds to its observation about the unseen opponent"
     )

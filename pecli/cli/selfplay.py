@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
-from pecli.cli.train import BeliefChoice
+from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
 
@@ -46,6 +46,8 @@ def selfplay(
         typer.Option("--set", help="Override a training setting, e.g. --set selfplay.pfsp_power=1 --set n_envs=16."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view (the line per round stays).")] = False,
+    algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm (both sides).")] = None,
+    device: DeviceOption = "cpu",
 ) -> None:
     """Train a pursuer and an evader by alternating self-play.
 
@@ -56,12 +58,15 @@ def selfplay(
     [bold]--resume[/] continues from the last finished turn. Settings: the config's
     [bold]training.selfplay[/] section.
     """
+    from pecli.rl.algorithms import torch_device
     from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
 
+    torch_device(device)  # a machine without CUDA refuses --device cuda in one line
     settings = parse_overrides(overrides or [])
     for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
+                       ("algo", algo.value if algo else None),
                        ("belief", belief.value if belief else None), ("selfplay.opponents", opponents.value if opponents else None)):
         if value is not None:
             settings[key] = value
@@ -94,6 +99,7 @@ def selfplay(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        device=device,
     )
 
     def interrupt(signum: int, frame: object) -> None:

@@ -39,7 +39,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
-from pecli.rl.algorithms import get_algorithm
+from pecli.rl.algorithms import get_algorithm, torch_device
 from pecli.rl.belief import BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
@@ -69,6 +69,7 @@ class SelfPlayJob:
     seed: int = 0
     resume: bool = False
     progress: bool = True
+    device: str = "cpu"  # where the networks train: cpu, cuda or auto
 
 
 @dataclass
@@ -162,7 +163,7 @@ class Learner:
         """Build the learner of ``role`` afresh, or from its newest round checkpoint and buffers when it has one."""
         self.role = role
         self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
-                                  seed=job.seed)
+                                  seed=job.seed, device=job.device)
         self.env = make_env(self.train_job, placeholder, job.seed)
         latest = state.latest(role)
         t = job.scenario.training
@@ -171,7 +172,7 @@ class Learner:
         else:
             path = run.path / latest.checkpoint
             try:
-                self.model = get_algorithm(t.algo).cls.load(path, env=self.env, device="cpu",
+                self.model = get_algorithm(t.algo).cls.load(path, env=self.env, device=torch_device(job.device),
                                                           tensorboard_log=str(run.path / "tb"))
             except Exception as exc:  # a damaged zip: SB3 raises many kinds
                 raise PecliError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
@@ -254,7 +255,8 @@ class SelfPlay:
         return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes)
 
     # -- the loop ------------------------------------------------------------------------------
-    def run(self) -> dict[Role, Path]:
+    def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
+        """Play the rounds not yet played; ``after_round(r)`` returning False stops after round ``r``."""
         th.set_num_threads(self.scenario.training.torch_threads)
         for role in ROLES:
             learner = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
@@ -268,6 +270,8 @@ class SelfPlay:
                 if not self.state.done(r, role):
                     self._turn(r, role)
             self.report(self._summary(r))
+            if after_round is not None and not after_round(r):
+                break
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
 
     def _turn(self, r: int, role: Role) -> None:

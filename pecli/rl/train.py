@@ -26,7 +26,7 @@ from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs
+from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata
@@ -99,6 +99,7 @@ class TrainJob:
     resume: bool = False
     progress: bool = True
     curriculum_steps: int | None = None
+    device: str = "cpu"  # where the networks train: cpu, cuda or auto (checkpoints always load on the CPU)
 
 
 def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float | None = None) -> CheckpointMeta:
@@ -170,14 +171,13 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
         buffer_size=t.buffer_size,
         learning_starts=t.learning_starts,
         batch_size=t.batch_size,
-        tau=t.tau,
         gamma=t.gamma,
         train_freq=(t.train_freq, "step"),
         gradient_steps=t.gradient_steps,
         policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
         seed=job.seed,
-        device="cpu",
+        device=torch_device(job.device),
         verbose=0,
         **algorithm_kwargs(t),
     )
@@ -226,7 +226,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         meta = read_metadata(last)
         seed = resume_seed(job.seed, meta.steps)
         env = make_env(job, opponent, seed)
-        model = get_algorithm(t.algo).cls.load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
+        model = get_algorithm(t.algo).cls.load(last, env=env, device=torch_device(job.device), tensorboard_log=str(run.path / "tb"))
         model.set_random_seed(seed)
         run.log_command()
         episodes, cpu_before = meta.episodes, meta.cpu_seconds or 0.0

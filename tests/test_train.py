@@ -49,7 +49,9 @@ def test_a_run_writes_the_zoo_layout(trained: Path) -> None:
     assert "pecli" in json.loads((run / "versions.json").read_text())
     assert "train pursuer" in (run / "command.txt").read_text()
     role = run / "pursuer"
-    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
+    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "resume" / "state.json").is_file()
+    assert json.loads((run / "run.json").read_text()) == {"command": "train", "role": "pursuer", "opponent": "greedy",
+                                                           "seed": 0}
     periodic = sorted(role.glob("ep*.zip"))
     assert periodic, "expected checkpoints every 3 episodes"
     meta = json.loads((role / "final.json").read_text())
@@ -73,8 +75,17 @@ def test_a_checkpoint_plays_as_a_policy(trained: Path, quick: Scenario) -> None:
 
 def test_a_checkpoint_refuses_another_scenario_or_role(trained: Path, paper: Scenario, quick: Scenario) -> None:
     final = str(trained / "run" / "pursuer" / "final.zip")
-    with pytest.raises(PolicyError, match="trained on scenario 'quick'"):
+    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'paper' in arena.height 8.0 there, "
+                                          "16.0 here; arena.width 8.0 there, 16.0 here; horizon 150 there, 400 here:"):
         resolve_policy(final, "pursuer", paper)
+    longer = quick.model_copy(update={"horizon": 200})  # the same name, another game: say what differs
+    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'quick' in horizon 150 there, 200 here:"):
+        resolve_policy(final, "pursuer", longer)
+    copy = Path(final).parent.parent.parent / "loose.zip"  # no run config beside it: names and fingerprints
+    copy.write_bytes(Path(final).read_bytes())
+    copy.with_suffix(".json").write_text(Path(final).with_suffix(".json").read_text())
+    with pytest.raises(PolicyError, match=r"trained on scenario 'quick' \(fingerprint \w+\), another game than 'quick'"):
+        resolve_policy(str(copy), "pursuer", longer)
     with pytest.raises(PolicyError, match="is a pursuer checkpoint; it cannot play evader"):
         resolve_policy(final, "evader", quick)
 
@@ -84,7 +95,7 @@ def test_damaged_checkpoints_give_clear_errors(trained: Path, tmp_path: Path, qu
     truncated = tmp_path / "truncated.zip"
     truncated.write_bytes(source.read_bytes()[:500])
     truncated.with_suffix(".json").write_text(source.with_suffix(".json").read_text())
-    with pytest.raises(PolicyError, match="cannot load"):
+    with pytest.raises(PolicyError, match=r"truncated.zip: not a checkpoint \(damaged or not a zip file\)"):
         resolve_policy(str(truncated), "pursuer", quick)
     orphan = tmp_path / "orphan.zip"
     orphan.write_bytes(source.read_bytes())
@@ -147,8 +158,9 @@ def test_ctrl_c_saves_a_resumable_checkpoint(tmp_path: Path, monkeypatch) -> Non
     assert result.exit_code == 130
     assert "--resume --name run" in result.output
     role = tmp_path / "run" / "pursuer"
-    assert (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
-    assert 0 < json.loads((role / "last.json").read_text())["steps"] < 5000
+    state = json.loads((role / "resume" / "state.json").read_text())
+    assert 0 < json.loads((role / "last.json").read_text())["steps"] == state["steps"] < 5000
+    assert state["replay"]["added"] > 0  # the buffer is part of the saved state
 
 
 def test_bad_settings_are_refused(tmp_path: Path) -> None:

@@ -7,14 +7,14 @@ never deserialises ``data``: it reads the state dicts with ``torch.load(weights_
 the networks from the metadata (algorithm, policy keyword arguments, belief) and the scenario.
 
 Checkpoints written before the metadata described the network (pecli 0.1.0 before this format) can
-only be rebuilt by unpickling; that needs an explicit ``pecli --trust`` (or ``PECLI_TRUST=1``).
+only be rebuilt by unpickling; that needs an explicit ``pecli --trust`` (see :mod:`pecli.trust`).
 """
 
 from __future__ import annotations
 
 import io
-import os
 import re
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -30,22 +30,9 @@ from pecli.rl.algorithms import get_algorithm
 from pecli.rl.belief import belief_observation_space
 from pecli.rl.extractors import BeliefExtractor
 from pecli.scenario import Scenario
+from pecli.trust import UntrustedFileError, trusted
 from pecli.zoo import CheckpointMeta, ZooError
 from wrappers.frozen_opponent import ACTION_SPACE, observation_space
-
-TRUST_VARIABLE = "PECLI_TRUST"
-
-
-def trusted() -> bool:
-    """Whether the user allowed unpickling (``pecli --trust`` sets ``PECLI_TRUST=1``)."""
-    return os.environ.get(TRUST_VARIABLE, "").strip().lower() not in ("", "0", "false", "no")
-
-
-def untrusted_refusal(path: str | Path, why: str) -> ZooError:
-    """The one-line refusal of a file that only pickle can read."""
-    return ZooError(f"{path}: {why}; unpickling runs any code its author put in it, so pecli refuses. If you trust "
-                    f"where it came from, pass `pecli --trust ...` (or set {TRUST_VARIABLE}=1)")
-
 
 def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any], dict[str, Any] | None]:
     """The state dicts (``policy``, ``actor.optimizer``, ...) and the torch variables of an SB3 zip, read
@@ -57,7 +44,9 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
             for name in archive.namelist():
                 if not name.endswith(".pth"):
                     continue
-                loaded = th.load(io.BytesIO(archive.read(name)), map_location=device, weights_only=True)
+                with warnings.catch_warnings():  # torch warns about pickle protocols before refusing
+                    warnings.simplefilter("ignore")
+                    loaded = th.load(io.BytesIO(archive.read(name)), map_location=device, weights_only=True)
                 if name in ("pytorch_variables.pth", "tensors.pth"):
                     variables = loaded
                 else:
@@ -68,7 +57,7 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
         raise ZooError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
         if "weights_only" in str(exc) or isinstance(exc, th.serialization.pickle.UnpicklingError):
-            raise untrusted_refusal(path, "its weights hold pickled objects, not just tensors") from None
+            raise UntrustedFileError(path, "its weights hold pickled objects, not just tensors") from None
         raise ZooError(f"{path}: damaged weights ({type(exc).__name__}: {exc})") from None
     if "policy" not in params:
         raise ZooError(f"{path}: not a checkpoint (it has no policy weights)")
@@ -122,8 +111,8 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
     unless the checkpoint predates pecli's network metadata and the user trusts it."""
     if not meta.policy_kwargs:
         if not trusted():
-            raise untrusted_refusal(path, "it was written before pecli described networks in its metadata, "
-                                          "so only pickle can rebuild it")
+            raise UntrustedFileError(path, "it was written before pecli described networks in its metadata, "
+                                           "so only unpickling can rebuild it")
         try:
             return get_algorithm(meta.algo).cls.load(path, device=device).policy
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds

@@ -11,6 +11,7 @@ from unittest import mock
 
 import numpy as np
 import pytest
+import torch as th
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -229,3 +230,14 @@ def test_the_best_evaluation_depends_on_the_role(tmp_path: Path, maximise: bool,
     for _ in range(5):
         callback.record()
     assert best == saved  # each better than the log's 0.3 and than every earlier one
+
+
+def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
+    """Training is bit-reproducible on one thread: the same command twice gives the same networks."""
+    from pecli.rl.checkpoint import read_weights
+
+    for zoo in ("a", "b"):
+        assert train(tmp_path / zoo, "--steps", "600").exit_code == 0
+    ours, theirs = (read_weights(tmp_path / zoo / "run" / "pursuer" / "final.zip")[0] for zoo in ("a", "b"))
+    for key, value in ours["policy"].items():
+        assert th.equal(value, theirs["policy"][key]), key

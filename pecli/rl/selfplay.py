@@ -287,10 +287,11 @@ class SelfPlay:
         progress = learner.progress(r)
         if progress is None:
             progress = {"round": r, "start_steps": int(model.num_timesteps), "cpu_seconds": 0.0}
-            seed = turn_seed(self.state.seed, r, role)
-        else:  # resumed inside the turn: its records so far, new games from a seed of their own
+        else:  # resumed inside the turn: its records so far
             tracker.restore(progress["tracker"])
-            seed = resume_seed(turn_seed(self.state.seed, r, role), int(model.num_timesteps))
+        seed = turn_seed(self.state.seed, r, role)
+        if model.num_timesteps > progress["start_steps"]:  # new games from a seed of their own
+            seed = resume_seed(seed, int(model.num_timesteps))
         learner.env.env_method("set_opponent", mixed)
         if learner.curriculum is not None:  # the games SB3 starts before any callback runs count too
             learner.curriculum.apply_to(learner.env, model.num_timesteps)

@@ -9,7 +9,8 @@ a full belief buffer (25 000 windows), the time and size of: SB3's pickled ``sav
 durable save adds: 250 episodes of at most 200 transitions, 50 000, an upper bound), the model zip
 (weights and optimisers), and a restore of the full state. Medians of ``--repeats``.
 
-``kills``: ``pecli train pursuer -c quick`` killed with SIGKILL at random moments (seeded), resumed
+``kills``: ``pecli train pursuer -c quick`` killed with SIGKILL at random moments (seeded, uniform in
+4-40 CPU-seconds of the process, so that they fall anywhere in the commit cycle), resumed
 after each, until it finishes. Per kill: the CPU the killed process had spent since its newest commit
 (lost work; before its first commit, since it started, imports included) against the CPU between two
 commits (one checkpoint interval), and whether the resume worked (no dead end).
@@ -130,10 +131,10 @@ def bench_kills(kills: int, seed: int, zoo: Path) -> None:
     command = start
     for k in range(kills + 1):
         process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        moment = rng.uniform(4.0, 30.0)  # wall seconds after the start (imports take about 4)
-        began, seen = time.monotonic(), stamp_of(state_file)
+        moment = rng.uniform(4.0, 40.0)  # CPU seconds of the process (imports take about 4)
+        seen = stamp_of(state_file)
         last_commit_cpu, commits = 0.0, 0  # before its first commit, everything the process spent is at stake
-        while process.poll() is None and (k == kills or time.monotonic() - began < moment):
+        while process.poll() is None and (k == kills or process_cpu(process.pid) < moment):
             stamp = stamp_of(state_file)
             if stamp != seen:  # a commit
                 cpu = process_cpu(process.pid)
@@ -156,7 +157,8 @@ def bench_kills(kills: int, seed: int, zoo: Path) -> None:
                 print(f"resume failed: {output.strip().splitlines()[-1]}")
             break
         command = [*base, "--resume"]
-    print("| kill | at wall s | CPU of the killed process, s | CPU lost since its newest commit, s | resumed from step |")
+    print("| kill | chosen moment, CPU s | CPU of the killed process, s | CPU lost since its newest commit, s | "
+          "committed step |")
     print("| ---: | ---: | ---: | ---: | ---: |")
     for row in rows:
         print("| " + " | ".join(str(x) for x in row) + " |")

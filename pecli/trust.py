@@ -21,8 +21,10 @@ def trusted() -> bool:
 
 
 class UntrustedFileError(PecliError):
-    """A file that only unpickling can read, refused without ``--trust``."""
+    """A file that only unpickling can read, refused without ``--trust`` (see :func:`untrusted`)."""
 
-    def __init__(self, path: str | Path, why: str) -> None:
-        super().__init__(f"{path}: {why}; unpickling runs any code its author put in it, so pecli refuses. If you "
-                         f"trust where it came from, pass `pecli --trust ...` (or set {TRUST_VARIABLE}=1)")
+
+def untrusted(path: str | Path, why: str) -> UntrustedFileError:
+    """The one-line refusal of ``path``, which only unpickling can read because ``why``."""
+    return UntrustedFileError(f"{path}: {why}; unpickling runs any code its author put in it, so pecli refuses. If you "
+                              f"trust where it came from, pass `pecli --trust ...` (or set {TRUST_VARIABLE}=1)")

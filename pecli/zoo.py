@@ -44,6 +44,7 @@ FINAL = "final"
 LAST = "last"
 BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
 JOB_FILE = "run.json"
+RESUME_DIR = "resume"  # per role: the learner's durable state (pecli.rl.durable)
 
 
 class ZooError(PecliError):

@@ -100,8 +100,11 @@ def test_a_payload_in_the_weights_is_refused(zoo: Path, tmp_path: Path) -> None:
     marker = tmp_path / "ran"
     path = poisoned_copy(zoo, tmp_path, marker, "policy.pth")
     result = runner.invoke(app, ["play", "-p", str(path), "-e", "greedy", "-n", "4"])
-    assert result.exit_code == 1 and "hold pickled objects" in result.output and "--trust" in result.output
+    assert result.exit_code == 1 and "holds pickled objects" in result.output and "--trust" in result.output
     assert len(result.output.strip().splitlines()) == 1
+    tournament = runner.invoke(app, ["tournament", str(path.parents[2]), "--baselines", "--episodes", "2", "--seeds",
+                                     "1", "--workers", "2", "--out", str(tmp_path / "t")])
+    assert tournament.exit_code == 1 and "holds pickled objects" in tournament.output  # from a worker process
     assert not marker.exists()
 
 

@@ -13,6 +13,7 @@ only be rebuilt by unpickling; that needs an explicit ``pecli --trust`` (see :mo
 from __future__ import annotations
 
 import io
+import pickle
 import re
 import warnings
 import zipfile
@@ -30,35 +31,45 @@ from pecli.rl.algorithms import get_algorithm
 from pecli.rl.belief import belief_observation_space
 from pecli.rl.extractors import BeliefExtractor
 from pecli.scenario import Scenario
-from pecli.trust import UntrustedFileError, trusted
+from pecli.trust import trusted, untrusted
 from pecli.zoo import CheckpointMeta, ZooError
 from wrappers.frozen_opponent import ACTION_SPACE, observation_space
 
+def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cpu") -> Any:
+    """What ``torch.save`` wrote to ``source`` (a file, or its bytes), if it is only tensors and plain
+    containers (``weights_only=True``); :class:`~pecli.trust.UntrustedFileError` for anything else, :class:`ZooError`
+    for a damaged file. ``name`` names it in messages."""
+    try:
+        with warnings.catch_warnings():  # torch warns about pickle protocols before refusing
+            warnings.simplefilter("ignore")
+            return th.load(io.BytesIO(source) if isinstance(source, bytes) else source, map_location=device,
+                           weights_only=True)
+    except OSError as exc:
+        raise ZooError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
+        if "weights_only" in str(exc) or isinstance(exc, pickle.UnpicklingError):
+            raise untrusted(name, "it holds pickled objects, not just tensors") from None
+        raise ZooError(f"{name}: damaged ({type(exc).__name__}: {exc})") from None
+
+
 def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any], dict[str, Any] | None]:
     """The state dicts (``policy``, ``actor.optimizer``, ...) and the torch variables of an SB3 zip, read
-    with ``weights_only=True``; nothing else in the zip is looked at. :class:`ZooError` if it cannot."""
+    with :func:`load_tensors`; nothing else in the zip is looked at. :class:`ZooError` if it cannot."""
     params: dict[str, Any] = {}
     variables = None
     try:
         with zipfile.ZipFile(path) as archive:
-            for name in archive.namelist():
-                if not name.endswith(".pth"):
-                    continue
-                with warnings.catch_warnings():  # torch warns about pickle protocols before refusing
-                    warnings.simplefilter("ignore")
-                    loaded = th.load(io.BytesIO(archive.read(name)), map_location=device, weights_only=True)
-                if name in ("pytorch_variables.pth", "tensors.pth"):
-                    variables = loaded
-                else:
-                    params[name.removesuffix(".pth")] = loaded
+            entries = {name: archive.read(name) for name in archive.namelist() if name.endswith(".pth")}
     except zipfile.BadZipFile:
         raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None
     except OSError as exc:
         raise ZooError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
-        if "weights_only" in str(exc) or isinstance(exc, th.serialization.pickle.UnpicklingError):
-            raise UntrustedFileError(path, "its weights hold pickled objects, not just tensors") from None
-        raise ZooError(f"{path}: damaged weights ({type(exc).__name__}: {exc})") from None
+    for name, data in entries.items():
+        loaded = load_tensors(data, f"{path} ({name})", device)
+        if name in ("pytorch_variables.pth", "tensors.pth"):
+            variables = loaded
+        else:
+            params[name.removesuffix(".pth")] = loaded
     if "policy" not in params:
         raise ZooError(f"{path}: not a checkpoint (it has no policy weights)")
     return params, variables
@@ -111,7 +122,7 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
     unless the checkpoint predates pecli's network metadata and the user trusts it."""
     if not meta.policy_kwargs:
         if not trusted():
-            raise UntrustedFileError(path, "it was written before pecli described networks in its metadata, "
+            raise untrusted(path, "it was written before pecli described networks in its metadata, "
                                            "so only unpickling can rebuild it")
         try:
             return get_algorithm(meta.algo).cls.load(path, device=device).policy

@@ -34,7 +34,6 @@ import torch as th
 from pecli.io import atomic_path, atomic_write_json
 from pecli.zoo import ZooError
 
-RESUME_DIR = "resume"
 RECORD = "state.json"
 FORMAT = 1
 
@@ -180,7 +179,7 @@ class DurableState:
     def restore(self, record: Record, model: Any, fit: Any = None) -> None:
         """Load the committed ``record`` (from :meth:`read`) into ``model``, built like the run's model
         (:func:`~pecli.rl.train.make_model` from the run's config), and into ``fit``."""
-        from pecli.rl.checkpoint import restore_model
+        from pecli.rl.checkpoint import load_tensors, restore_model
 
         self._collect_garbage(record)
         restore_model(model, self.directory / record.model)
@@ -202,8 +201,8 @@ class DurableState:
                 if record.belief_rng is not None:
                     pairs.rng.bit_generator.state = record.belief_rng
                 if record.belief_optimizer:
-                    state = th.load(self.directory / record.belief_optimizer, weights_only=True)
-                    fit.optimizer.load_state_dict(state)
+                    path = self.directory / record.belief_optimizer
+                    fit.optimizer.load_state_dict(load_tensors(path, path))
         except (OSError, ValueError, KeyError, RuntimeError) as exc:  # a truncated array, another buffer size
             raise ZooError(f"cannot restore {self.directory}: {type(exc).__name__}: {exc}") from None
         self.record = record

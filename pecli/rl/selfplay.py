@@ -43,11 +43,11 @@ from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
-from pecli.rl.durable import RESUME_DIR, DurableState
+from pecli.rl.durable import DurableState
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.zoo import Run, tournament_ratings
+from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 
 STATE_FILE = "selfplay.json"
 

@@ -24,13 +24,13 @@ from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
-from pecli.rl.durable import RESUME_DIR, DurableState
+from pecli.rl.durable import DurableState
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run
+from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}

@@ -50,7 +50,7 @@ def checkpoints(tmp_path_factory, quick: Scenario) -> dict[str, tuple[Path, obje
         env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
         model = make_model(job, env, tensorboard=None)
         model.learn(120)  # 50 transitions of warm-up, then updates (CrossQ's batch statistics move)
-        path = Run.create(zoo, algo, scenario).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
+        path = Run.create(zoo, algo, scenario, {"command": "test"}).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
         made[algo] = (path, model, env)
     return made
 

@@ -183,7 +183,7 @@ def report(args: argparse.Namespace) -> None:
         print(f"best capture rate within {minutes:g} CPU-min: median {median} ({shown})")
 
 
-SELFPLAY = ROOT / "runs" / "bench_train_selfplay"
+SELFPLAY = Path(os.environ.get("PECLI_BENCH_SELFPLAY", ROOT / "runs" / "bench_train_selfplay"))
 
 
 def _process_cpu_seconds(pid: int) -> float:
@@ -202,7 +202,7 @@ def selfplay(args: argparse.Namespace) -> None:
     SELFPLAY.mkdir(parents=True, exist_ok=True)
     for seed in args.seeds:
         for config in args.configs:
-            run = SELFPLAY / f"{config}-s{seed}"
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
             before = sum(t["cpu_seconds"] for t in _turns(run))  # earlier processes' finished turns
             if before >= 60 * args.minutes or (run / "done").exists():
                 continue
@@ -225,14 +225,14 @@ def selfplay(args: argparse.Namespace) -> None:
     for seed in args.seeds:
         final = {}
         for config in args.configs[:2]:
-            turns = _turns(SELFPLAY / f"{config}-s{seed}")
-            final[config] = {t["role"]: SELFPLAY / f"{config}-s{seed}" / t["checkpoint"] for t in turns}
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
+            final[config] = {t["role"]: run / t["checkpoint"] for t in _turns(run)}
         if any(set(f) != {"pursuer", "evader"} for f in final.values()):
             print(f"| {seed} | - | - | a run has no finished round yet |")
             continue
         a, b = args.configs[:2]
         rates = [_capture_rate(final[x]["pursuer"], final[y]["evader"], args.episodes, seed) for x, y in ((a, b), (b, a))]
-        rounds = " / ".join(str(len(_turns(SELFPLAY / f"{c}-s{seed}")) // 2) for c in (a, b))
+        rounds = " / ".join(str(len(_turns(SELFPLAY / f"{Path(c).stem}-s{seed}")) // 2) for c in (a, b))
         print(f"| {seed} | {rates[0]:.3f} | {rates[1]:.3f} | {rounds} |", flush=True)
 
 

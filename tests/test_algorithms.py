@@ -24,14 +24,7 @@ from pecli.tournament import find_players, run_tournament, schedule
 from pecli.zoo import Run, read_metadata
 
 runner = CliRunner()
-
-
-@pytest.fixture(autouse=True)
-def keep_torch_threads():
-    """Training sets torch's thread count for the process; later tests keep the one they started with."""
-    threads = th.get_num_threads()
-    yield
-    th.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("keep_torch_threads")
 TINY = {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [16, 16], "n_envs": 4}
 
 

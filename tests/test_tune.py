@@ -8,7 +8,6 @@ from pathlib import Path
 
 import optuna
 import pytest
-import torch as th
 import yaml
 from typer.testing import CliRunner
 
@@ -18,16 +17,7 @@ from pecli.rl.search_space import load_space, parse_space
 from pecli.scenario import Scenario, load_scenario
 
 runner = CliRunner()
-
-
-@pytest.fixture(autouse=True)
-def keep_torch_threads():
-    """Training sets torch's thread count for the process; later tests keep the one they started with."""
-    threads = th.get_num_threads()
-    yield
-    th.set_num_threads(threads)
-
-
+pytestmark = pytest.mark.usefixtures("keep_torch_threads")
 SMALL = {
     "fixed": {"steps": 5000, "learning_starts": 100, "buffer_size": 2000, "batch_size": 32, "n_envs": 4},
     "parameters": {
@@ -94,7 +84,8 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
                                  str(tmp_path / "tuned.yaml")])
     assert result.exit_code == 0, result.output
     assert "Best trials" in result.output
-    assert {"report.md", "history.png", "intermediate.png"} <= {p.name for p in (folder / "quick-pursuer").iterdir()}
+    assert {"report.md", "space.yaml", "history.png", "intermediate.png"} <= {p.name for p in (folder / "quick-pursuer").iterdir()}
+    assert yaml.safe_load((folder / "quick-pursuer" / "space.yaml").read_text()) == SMALL
     profile = load_scenario(str(tmp_path / "tuned.yaml"))
     best = optuna.load_study(study_name="quick-pursuer", storage=storage).best_trial
     assert profile.name == "tuned" and profile.training.algo == best.params["algo"]

@@ -153,15 +153,14 @@ def _command(what: str, doc: str) -> Any:
     return command
 
 
-_COMMON = """
-
-    Each trial draws training settings from the search space ([bold]--space[/], default: `pecli tune space`),
-    trains within [bold]--cpu-minutes[/] of CPU time and is evaluated [bold]--evaluations[/] times on
-    held-apart seeds; the pruner stops trials that fall behind, and the last evaluation is the trial's
-    score. The study is stored (SQLite by default), so [bold]--resume[/] continues it after Ctrl-C or a
-    kill, and processes on other machines can share it through [bold]--storage[/]. At the end, the report
-    (best trials, importances, history PNGs) is written to <dir>/<study>/.
-    """
+_COMMON = (
+    "\n\nEach trial draws training settings from the search space ([bold]--space[/], default: `pecli tune space`), "
+    "trains within [bold]--cpu-minutes[/] of CPU time and is evaluated [bold]--evaluations[/] times on held-apart "
+    "seeds; the pruner stops trials that fall behind, and the last evaluation is the trial's score. The first trial "
+    "of a new study is the config's own settings. The study is stored (SQLite by default), so [bold]--resume[/] "
+    "continues it after Ctrl-C or a kill, and processes on other machines can share it through [bold]--storage[/]. "
+    "At the end, the report (best trials, importances, history PNGs) is written to <dir>/<study>/."
+)
 app.command("pursuer")(_command("pursuer", "Tune the training of a pursuer against a frozen evader." + _COMMON))
 app.command("evader")(_command("evader", "Tune the training of an evader against a frozen pursuer." + _COMMON))
 app.command("selfplay")(_command("selfplay", "Tune self-play; a trial scores both sides against the other's "
@@ -192,7 +191,7 @@ def report(
     if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).is_file():
         raise PecliError(f"no study storage at {url.removeprefix('sqlite:///')}")
     study = load_study(url, study_name)
-    console.print(summary(study), highlight=False, markup=False)
+    console.print(summary(study), highlight=False, markup=False, soft_wrap=True)
     written = write_report(study, out or folder / study_name)
     err_console.print(f"wrote {', '.join(str(p) for p in written)}", highlight=False)
     if profile is not None:

@@ -202,7 +202,7 @@ def optimize(worker: Worker) -> None:
     states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
     objective = Objective(settings, worker.folder, worker.device)
     study.optimize(
-        objective, n_trials=left, catch=(ValueError, RuntimeError),
+        objective, n_trials=left, catch=(PecliError, ValueError, RuntimeError),  # a failed trial, not a failed study
         callbacks=[optuna.study.MaxTrialsCallback(worker.total, states=states), _reporter(worker.report)],
     )
 

@@ -72,7 +72,8 @@ def _cell(value: Any) -> str:
 
 
 def write_report(study: optuna.Study, folder: Path) -> list[Path]:
-    """``report.md`` and the PNGs (``history.png``, ``importances.png``, ``intermediate.png``) into ``folder``."""
+    """``report.md``, the search space (``space.yaml``) and the PNGs (``history.png``, ``importances.png``,
+    ``intermediate.png``) into ``folder``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -80,8 +81,9 @@ def write_report(study: optuna.Study, folder: Path) -> list[Path]:
     from optuna.visualization import matplotlib as plots
 
     folder.mkdir(parents=True, exist_ok=True)
-    written = [folder / "report.md"]
+    written = [folder / "report.md", folder / "space.yaml"]
     atomic_write_text(written[0], summary(study) + "\n")
+    atomic_write_text(written[1], stored_settings(study).space_text)  # the search space as the user wrote it
     complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
     figures = {"history.png": lambda: plots.plot_optimization_history(study),
                "intermediate.png": lambda: plots.plot_intermediate_values(study)}

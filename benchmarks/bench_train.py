@@ -17,7 +17,8 @@ greedy evader (200 batched episodes) every ``--eval-every`` transitions, until e
 ``--resume`` continues stopped runs until they have used ``--minutes`` in all. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
 takes each seed's best evaluation within each budget of ``--at`` (default 10 and 30 CPU-minutes),
-prints their medians, and draws ``docs/learning_curves_<belief>.png``. ``--belief`` picks the
+prints their medians, and draws ``docs/learning_curves_<belief>.png`` (``learning_curves_<config>_<belief>.png``
+for another config than paper). ``--belief`` picks the
 actor's belief (runs are named ``<config>-<belief>-s<seed>``).
 
 ``selfplay`` runs ``pecli selfplay`` for each config of ``--configs`` (default: tuned and paper) and each seed
@@ -174,7 +175,8 @@ def report(args: argparse.Namespace) -> None:
     ax.set_title(f"pecli train pursuer, {args.config}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = ROOT / "docs" / f"learning_curves_{args.belief}.png"
+    out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper"
+                                       else f"learning_curves_{args.config}_{args.belief}.png")
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
     for minutes, values in at.items():
@@ -266,6 +268,7 @@ def main() -> None:
     r.add_argument("--config", default="paper")
     r.add_argument("--belief", default="none")
     r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
+    r.add_argument("--out", type=Path, default=None, help="the plot (default: docs/learning_curves_...png)")
     p = sub.add_parser("selfplay")
     p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])

@@ -363,8 +363,8 @@ def _describe(error: dict[str, Any]) -> str:
 
 
 def _location(error: dict[str, Any]) -> str:
-    # drop the discriminator tags pydantic adds to the path of a tagged union (e.g. 'car')
-    parts = [str(p) for p in error["loc"] if p not in ("car", "point_mass")]
+    # drop the discriminator tags pydantic adds to the path of a tagged union (e.g. 'car'); quote odd keys
+    parts = [str(p) if str(p).isprintable() else repr(p) for p in error["loc"] if p not in ("car", "point_mass")]
     return ".".join(parts)
 
 
@@ -473,7 +473,7 @@ class StrictLoader(yaml.SafeLoader):
             if seen:
                 raise yaml.constructor.ConstructorError(
                     "while constructing a mapping", node.start_mark,
-                    f"duplicate key '{key}' (first given on line {first_line[key]})", key_node.start_mark)
+                    f"duplicate key {key!r} (first given on line {first_line[key]})", key_node.start_mark)
             first_line[key] = key_node.start_mark.line + 1
         return super().construct_mapping(node, deep=deep)
 
@@ -491,7 +491,7 @@ def read_yaml(path: Path) -> Any:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "not valid YAML"
+        problem = " ".join(str(getattr(exc, "problem", None) or "not valid YAML").split())
         raise ConfigError(f"{path}:{where}: {problem}") from None
     except RecursionError:
         raise ConfigError(f"{path}: nested too deeply to be a scenario") from None

@@ -426,3 +426,53 @@ def test_exported_policies_are_policies(exports, quick: Scenario) -> None:
     actions = policy.act(np.zeros((3, 11), dtype=np.float32))
     assert actions.shape == (3, 2) and np.all(np.abs(actions) <= 1)
     np.testing.assert_allclose(policy.command, actions * policy.model.limits, rtol=1e-6)
+
+
+# -- never export or command a broken policy (issue 21) ---------------------------------------------------------------
+def poison(actor: th.nn.Module) -> None:
+    """What a diverged training leaves: the first layer of the actor's MLP is NaN."""
+    with th.no_grad():
+        actor.mu[0].weight.fill_(math.nan)
+
+
+@pytest.fixture(scope="module")
+def broken(exports, quick: Scenario) -> dict:
+    """The 'none' pursuer's checkpoint, a copy of it with NaN weights in its run, and that network as an ONNX graph."""
+    from pecli.export.exporter import onnx_bytes
+    from pecli.export.sidecar import build_sidecar
+    from pecli.policies.learned import LearnedPolicy, algorithm_class
+    from pecli.zoo import read_metadata
+
+    checkpoint, _ = exports["none"]
+    model = algorithm_class("td3").load(checkpoint, device="cpu")
+    poison(model.policy.actor)
+    saved = Run(checkpoint.parent.parent).save(model, "pursuer", "diverged", read_metadata(checkpoint))
+    learned = LearnedPolicy.load(checkpoint, "pursuer", quick)
+    poison(learned.actor)
+    graph, data = onnx_bytes(learned, SILayout(quick, "pursuer"), 17)
+    sidecar = build_sidecar(graph, quick, learned.meta, checkpoint, 17, learned.draws)
+    return {"checkpoint": checkpoint, "diverged": saved, "model": ExportedModel.from_bytes(data, sidecar)}
+
+
+def test_a_network_with_nan_weights_is_not_exported(broken) -> None:
+    diverged = broken["diverged"]
+    result = runner.invoke(app, ["export", "onnx", str(diverged), "-n", "1"])
+    assert result.exit_code == 1 and "NaN or infinite" in result.output and "not exported" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not diverged.with_suffix(".onnx").exists()
+
+
+def test_parity_fails_when_either_side_is_not_finite(broken, quick: Scenario) -> None:
+    """NaN - NaN is NaN and max(0.0, NaN) is 0.0: a NaN export used to pass with a difference of 0."""
+    from pecli.export.check import check_parity
+
+    healthy = resolve_policy(str(broken["checkpoint"]), "pursuer", quick)
+    report = check_parity(ExportedPolicy(broken["model"], quick), healthy, quick, episodes=2)
+    assert not report.passed and report.non_finite > 0 and "NaN or infinite" in report.failure()
+    assert math.isfinite(report.max_action_difference) and json.dumps(report.to_dict(), allow_nan=False)
+
+
+def test_the_runtime_never_returns_a_nan_command(broken) -> None:
+    controller = Controller(broken["model"], seed=0)
+    with pytest.raises(ExportError, match="never sent to the motors"):
+        controller.step(np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0]))

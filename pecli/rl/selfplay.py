@@ -41,7 +41,7 @@ from pecli.policies.learned import algorithm_class
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
-from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
+from pecli.rl.callbacks import CurriculumCallback, FiniteCheck, PoolTracker, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model
 from pecli.roles import ROLES, Role, opponent_of
@@ -292,7 +292,7 @@ class SelfPlay:
         cpu = time.process_time()
         try:
             try:
-                model.learn(sp.steps_per_round, callback=CallbackList([*learner.callbacks, tracker, display]),
+                model.learn(sp.steps_per_round, callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
                             reset_num_timesteps=False, tb_log_name=role)
             finally:
                 display.close()

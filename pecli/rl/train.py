@@ -25,7 +25,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy, algorithm_class
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.policies import CentralCriticPolicy
 from pecli.roles import Role, opponent_of
@@ -258,7 +258,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
             next_checkpoint += t.checkpoint_every
 
     stats.listeners.append(checkpoint)
-    callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
+    callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)

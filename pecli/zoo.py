@@ -15,15 +15,19 @@ Layout of one run::
             replay_buffer.pkl  its replay buffer, and
             belief_fit.pt    a learned belief's own buffer and optimiser
 
-Every file is written atomically.
+Every file is written atomically. A run's name is one folder name (:func:`check_run_name`), and a
+process that creates or opens a run to write it holds the run folder's lock (:mod:`pecli.locks`)
+until it closes the run or ends.
 """
 
 from __future__ import annotations
 
 import json
 import platform
+import re
 import shlex
 import sys
+import weakref
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -34,6 +38,7 @@ import yaml
 from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text
+from pecli.locks import acquire, release
 from pecli.roles import Role
 from pecli.scenario import Scenario, scenario_from_dict
 
@@ -122,16 +127,47 @@ def command_line() -> str:
     return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])
 
 
+_RUN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}")
+
+
+def check_run_name(name: str) -> str:
+    """``name`` if it is one folder name of letters, digits, ``-``, ``_`` and ``.`` (not starting with
+    ``.``, at most 128 characters); else :class:`ZooError`: a run stays inside its zoo."""
+    if not isinstance(name, str) or not _RUN_NAME.fullmatch(name):
+        raise ZooError(f"run name {name!r} is not allowed: use one folder name of letters, digits, '-', '_' "
+                       "and '.' (not starting with '.', at most 128 characters)")
+    return name
+
+
+def safe_run_name(text: str) -> str:
+    """``text`` as a run name: every other character becomes ``-`` (for names made from a scenario's name)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).lstrip(".-")[:128] or "run"
+
+
 class Run:
-    """One training run in a zoo: ``zoo/<name>/``."""
+    """One training run in a zoo: ``zoo/<name>/``.
+
+    :meth:`create` and :meth:`open` take the run folder's lock for writing; it is released by
+    :meth:`close`, when the object is garbage-collected, or when the process ends.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.name = path.name
 
+    def _lock(self) -> None:
+        acquire(self.path, f"run '{self.name}'")
+        self._release = weakref.finalize(self, release, self.path)
+
+    def close(self) -> None:
+        """Release the run folder's lock (taken by :meth:`create` or :meth:`open`)."""
+        if hasattr(self, "_release"):
+            self._release()
+
     @staticmethod
     def check_new(zoo: Path, name: str) -> None:
-        """:class:`ZooError` unless ``zoo/name`` is free for a new run."""
+        """:class:`ZooError` unless ``name`` is a valid run name and ``zoo/name`` is free for a new run."""
+        check_run_name(name)
         if (zoo / name).exists():
             raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
 
@@ -145,6 +181,7 @@ class Run:
         except OSError as exc:
             raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
         run = cls(path)
+        run._lock()
         run.write_config(scenario)
         atomic_write_json(path / "versions.json", versions())
         run.log_command()
@@ -152,10 +189,13 @@ class Run:
 
     @classmethod
     def open(cls, zoo: Path, name: str) -> Run:
-        path = zoo / name
+        """The run ``zoo/name``, locked for writing; :class:`ZooError` if there is none."""
+        path = zoo / check_run_name(name)
         if not (path / "config.yaml").is_file():
             raise ZooError(f"no run '{name}' in {zoo} to resume")
-        return cls(path)
+        run = cls(path)
+        run._lock()
+        return run
 
     def scenario(self) -> Scenario:
         """The resolved scenario the run was started with."""

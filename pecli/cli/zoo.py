@@ -65,6 +65,7 @@ def remove(
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask for confirmation.")] = False,
 ) -> None:
     """Delete a run (its folder) or one checkpoint (the zip and its metadata)."""
+    from pecli.locks import locked
     from pecli.zoo import metadata_path
 
     if target.is_dir():
@@ -78,7 +79,8 @@ def remove(
     if not yes and not typer.confirm(f"Delete {what}?", err=True):
         raise typer.Exit(code=1)
     if target.is_dir():
-        shutil.rmtree(target)
+        with locked(target, f"run '{target.name}'"):  # not while a training writes it
+            shutil.rmtree(target)
     else:
         target.unlink()
         metadata_path(target).unlink(missing_ok=True)

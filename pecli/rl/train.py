@@ -30,7 +30,7 @@ from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.policies import CentralCriticPolicy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata
+from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata, safe_run_name
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -305,4 +305,4 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
 
 def default_run_name(what: str, scenario: Scenario, seed: int) -> str:
     """``<scenario>-<what>-s<seed>-<yyyymmdd-hhmmss>``, ``what`` a role or ``selfplay``."""
-    return f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return safe_run_name(f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}")

@@ -21,7 +21,6 @@ import signal
 import sys
 import threading
 import time
-import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -40,7 +39,7 @@ from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, ZooError, read_metadata
+from pecli.zoo import LAST, ZooError, checkpoint_problem, read_metadata
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
@@ -90,8 +89,8 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
     except ZooError as exc:
         skipped.append(str(exc))
         return None
-    if not zipfile.is_zipfile(path):
-        skipped.append(f"{path}: damaged checkpoint (truncated or not a zip)")
+    if problem := checkpoint_problem(path):
+        skipped.append(f"{path}: {problem}")
         return None
     if meta.scenario_hash != scenario.fingerprint():
         skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")

@@ -107,6 +107,32 @@ def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
         raise ZooError(f"{path}: damaged metadata ({exc})") from None
 
 
+CHECKPOINT_ENTRIES = ("data", "policy.pth")  # what every checkpoint zip (SB3's save) holds
+
+
+def checkpoint_problem(checkpoint: Path, thorough: bool = False) -> str:
+    """Why ``checkpoint`` is not a readable checkpoint file, or ``""``: empty, not a zip (truncated or
+    damaged), a zip without a checkpoint's entries; with ``thorough``, also an entry that fails its CRC
+    check (which reads the whole file)."""
+    import zipfile
+    import zlib
+
+    try:
+        if checkpoint.stat().st_size == 0:
+            return "empty file"
+        with zipfile.ZipFile(checkpoint) as archive:
+            missing = [name for name in CHECKPOINT_ENTRIES if name not in archive.namelist()]
+            if missing:
+                return f"not a pecli checkpoint (no '{missing[0]}' in the zip: truncated, or another zip)"
+            if thorough and (bad := archive.testzip()) is not None:
+                return f"damaged zip ('{bad}' fails its CRC check)"
+    except (zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError, ValueError):
+        return "damaged zip (truncated or not a zip)"
+    except OSError as exc:
+        return f"unreadable ({exc.strerror or exc})"
+    return ""
+
+
 def versions() -> dict[str, str]:
     """Versions of what a checkpoint depends on."""
     import numpy
@@ -297,8 +323,6 @@ def runs_in(zoo: Path) -> list[Run]:
 
 def checkpoints_in(run: Run) -> list[CheckpointEntry]:
     """The checkpoints of a run, each with its metadata; damaged ones say why."""
-    import zipfile
-
     entries = []
     for path in sorted(run.path.glob("*/*.zip")):
         if not metadata_path(path).is_file():
@@ -309,8 +333,7 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
         except ZooError:
             entries.append(CheckpointEntry(path, None, "damaged metadata"))
             continue
-        problem = "" if zipfile.is_zipfile(path) else "damaged zip"
-        entries.append(CheckpointEntry(path, meta, problem))
+        entries.append(CheckpointEntry(path, meta, checkpoint_problem(path)))
     return entries
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -476,3 +477,25 @@ def test_the_runtime_never_returns_a_nan_command(broken) -> None:
     controller = Controller(broken["model"], seed=0)
     with pytest.raises(ExportError, match="never sent to the motors"):
         controller.step(np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (lambda s: s["sensor"].update(fov_rad=1.0), r"sensor\.fov_rad is 1\.0, not 2\.09"),
+        (lambda s: s.update(command_limits=[9.0, 2.0]), r"command_limits\[0\] is 9\.0, not 3\.2"),
+        (lambda s: s["scenario"].update(fingerprint="0123456789abcdef"), r"scenario\.fingerprint is '0123456789abcdef'"),
+        (lambda s: s["control"].update(dt_s=0.05), r"control\.dt_s is 0\.05, not 0\.1"),
+        (lambda s: s["scenario"]["config"]["pursuer"]["sensor"].update(range=9.0), "the sidecar was edited"),
+    ],
+)
+def test_export_check_refuses_an_edited_sidecar(exports, tmp_path: Path, edit, expected: str) -> None:
+    checkpoint, model = exports["none"]
+    copy = tmp_path / "m.onnx"
+    copy.write_bytes(model.read_bytes())
+    sidecar = json.loads(sidecar_path(model).read_text())
+    edit(sidecar)
+    sidecar_path(copy).write_text(json.dumps(sidecar))
+    result = runner.invoke(app, ["export", "check", str(copy), str(checkpoint), "-n", "1"])
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+    assert re.search(expected, result.output.replace("\n", "")), result.output

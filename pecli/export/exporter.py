@@ -20,7 +20,7 @@ from pecli import __version__
 from pecli.errors import ExportError
 from pecli.export.check import ParityReport, check_parity
 from pecli.export.graph import DEFAULT_OPSET, MIN_OPSET, PolicyGraph, max_opset, to_onnx
-from pecli.export.sidecar import build_sidecar
+from pecli.export.sidecar import build_sidecar, sidecar_differences
 from pecli.game.si import SILayout
 from pecli.io import atomic_path, atomic_write_json
 from pecli.policies.exported import ExportedPolicy, exported_scenario
@@ -146,7 +146,16 @@ def check_export(
     if sidecar.get("checkpoint", {}).get("sha256") != file_sha256(checkpoint):
         raise ExportError(f"{model} was exported from another checkpoint than {checkpoint} (SHA-256 differs)")
     scenario = exported_scenario(sidecar, source=str(sidecar_path(model)))
+    meta = read_metadata(checkpoint)
+    if meta.scenario_hash != scenario.fingerprint():
+        raise ExportError(f"{sidecar_path(model)}: its scenario ({scenario.fingerprint()}) is not the one "
+                          f"{checkpoint.name} was trained on ({meta.scenario_hash}): the sidecar was edited; "
+                          "export again")
     learned = LearnedPolicy.load(checkpoint, exported_model.role, scenario)  # type: ignore[arg-type]
     require_finite(learned, checkpoint)
+    if differences := sidecar_differences(sidecar, scenario, learned.meta, learned.draws):
+        more = f" (and {len(differences) - 1} more)" if len(differences) > 1 else ""
+        raise ExportError(f"{sidecar_path(model)} does not match its scenario and checkpoint: {differences[0]}{more}; "
+                          "a robot would act on the wrong numbers: export again")
     return check_parity(ExportedPolicy(exported_model, scenario), learned, scenario, episodes, seed, opponent)
 

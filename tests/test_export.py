@@ -60,7 +60,7 @@ def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pu
     if isinstance(env, BeliefVecEnv):
         env.set_belief(model.policy.actor.features_extractor.belief)
     model.learn(80)  # 50 transitions of warm-up, then a few updates
-    return Run.create(zoo, name, scenario).save(model, role, "final", checkpoint_meta(job, model, 0))
+    return Run.create(zoo, name, scenario, {"command": "test"}).save(model, role, "final", checkpoint_meta(job, model, 0))
 
 
 @pytest.fixture(scope="module")
@@ -430,10 +430,25 @@ def test_exported_policies_are_policies(exports, quick: Scenario) -> None:
 
 
 # -- never export or command a broken policy (issue 21) ---------------------------------------------------------------
-def poison(actor: th.nn.Module) -> None:
-    """What a diverged training leaves: the first layer of the actor's MLP is NaN."""
-    with th.no_grad():
-        actor.mu[0].weight.fill_(math.nan)
+def poisoned_copy(checkpoint: Path, name: str) -> Path:
+    """A copy of ``checkpoint`` beside it whose actor's first layer is NaN (what a diverged training leaves)."""
+    import io
+    import shutil
+    import zipfile
+
+    out = checkpoint.with_name(f"{name}.zip")
+    with zipfile.ZipFile(checkpoint) as source, zipfile.ZipFile(out, "w") as copy:
+        for entry in source.infolist():
+            data = source.read(entry)
+            if entry.filename == "policy.pth":
+                weights = th.load(io.BytesIO(data), weights_only=True)
+                weights["actor.mu.0.weight"].fill_(math.nan)
+                buffer = io.BytesIO()
+                th.save(weights, buffer)
+                data = buffer.getvalue()
+            copy.writestr(entry, data)
+    shutil.copy(checkpoint.with_suffix(".json"), out.with_suffix(".json"))
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -441,18 +456,15 @@ def broken(exports, quick: Scenario) -> dict:
     """The 'none' pursuer's checkpoint, a copy of it with NaN weights in its run, and that network as an ONNX graph."""
     from pecli.export.exporter import onnx_bytes
     from pecli.export.sidecar import build_sidecar
-    from pecli.policies.learned import LearnedPolicy, algorithm_class
-    from pecli.zoo import read_metadata
+    from pecli.policies.learned import LearnedPolicy
 
     checkpoint, _ = exports["none"]
-    model = algorithm_class("td3").load(checkpoint, device="cpu")
-    poison(model.policy.actor)
-    saved = Run(checkpoint.parent.parent).save(model, "pursuer", "diverged", read_metadata(checkpoint))
-    learned = LearnedPolicy.load(checkpoint, "pursuer", quick)
-    poison(learned.actor)
+    diverged = poisoned_copy(checkpoint, "diverged")
+    learned = LearnedPolicy.load(diverged, "pursuer", quick)
+    assert not th.isfinite(learned.actor.mu[0].weight).all()
     graph, data = onnx_bytes(learned, SILayout(quick, "pursuer"), 17)
     sidecar = build_sidecar(graph, quick, learned.meta, checkpoint, 17, learned.draws)
-    return {"checkpoint": checkpoint, "diverged": saved, "model": ExportedModel.from_bytes(data, sidecar)}
+    return {"checkpoint": checkpoint, "diverged": diverged, "model": ExportedModel.from_bytes(data, sidecar)}
 
 
 def test_a_network_with_nan_weights_is_not_exported(broken) -> None:

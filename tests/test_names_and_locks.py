@@ -94,7 +94,7 @@ def hold(folder: Path, code: str = "from pecli.locks import acquire; acquire({fo
 
 def test_a_run_has_one_writer(tmp_path: Path, quick: Scenario) -> None:
     """A run being written (here by another process that opened it) refuses a resume, a second opener and rm."""
-    run = Run.create(tmp_path, "r", quick)
+    run = Run.create(tmp_path, "r", quick, {"command": "train", "role": "pursuer", "opponent": "greedy", "seed": 0})
     run.close()
     holder = hold(tmp_path, "from pathlib import Path; from pecli.zoo import Run; run = Run.open(Path({folder!r}), 'r')")
     try:

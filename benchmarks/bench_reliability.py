@@ -171,7 +171,8 @@ def export_and_zoo_inputs(work: Path, env: dict[str, str], base: Path) -> list[O
     checkpoint = base / "pursuer" / "final.zip"
     model = work / "export" / "final.onnx"
     code, out = pecli(["export", "onnx", str(checkpoint), "--out", str(model), "-n", "1"], env)
-    assert code == 0, out
+    if code != 0:
+        return [Outcome("inputs", "exporting the base checkpoint", code, 0, "setup failed", out[-200:])]
     sidecar = json.loads(Path(f"{model}.json").read_text())
     edits = {"fov_rad": lambda s: s["sensor"].update(fov_rad=1.0),
              "command_limits": lambda s: s.update(command_limits=[9.0, 2.0]),
@@ -230,15 +231,20 @@ def non_finite_checkpoints(folder: Path) -> tuple[int, int]:
 
 
 POISON = '''
-import math, shutil, sys
+import io, math, shutil, sys, zipfile
 from pathlib import Path
 import torch
-from pecli.policies.learned import algorithm_class
 checkpoint, out = Path(sys.argv[1]), Path(sys.argv[2])
-model = algorithm_class("td3").load(checkpoint, device="cpu")
-with torch.no_grad():
-    model.policy.actor.mu[0].weight.fill_(math.nan)
-model.save(out)
+with zipfile.ZipFile(checkpoint) as source, zipfile.ZipFile(out, "w") as copy:
+    for entry in source.infolist():
+        data = source.read(entry)
+        if entry.filename == "policy.pth":
+            weights = torch.load(io.BytesIO(data), weights_only=True)
+            weights["actor.mu.0.weight"].fill_(math.nan)
+            buffer = io.BytesIO()
+            torch.save(weights, buffer)
+            data = buffer.getvalue()
+        copy.writestr(entry, data)
 shutil.copy(checkpoint.with_suffix(".json"), out.with_suffix(".json"))
 '''
 
@@ -286,7 +292,8 @@ def nan_policies(work: Path, env: dict[str, str], base: Path) -> list[Outcome]:
     poisoned = base / "pursuer" / "poisoned.zip"
     done = subprocess.run([sys.executable, "-c", POISON, str(base / "pursuer" / "final.zip"), str(poisoned)], env=env,
                           capture_output=True, text=True, cwd=NEUTRAL)
-    assert done.returncode == 0, done.stderr
+    if done.returncode != 0:
+        return outcomes + [Outcome("nan", "poisoning a checkpoint", done.returncode, 0, "setup failed", done.stderr[-200:])]
     code, out = pecli(["export", "onnx", str(poisoned), "-n", "1"], env)
     written = poisoned.with_suffix(".onnx").is_file()
     outcome = judge("nan", "export onnx of a checkpoint with NaN weights", code, out)
@@ -396,30 +403,35 @@ def main() -> None:
     MEMORY_LIMIT = int(args.memory_limit_gib * 2**30)
     env = environment(args.source)
     outcomes: list[Outcome] = []
+    print("| part | case | exit | error lines | verdict | message |\n|---|---|---|---|---|---|", flush=True)
     with tempfile.TemporaryDirectory(prefix="pecli-reliability-") as tmp:
         work = Path(tmp)
         base = work / "zoo-base" / "base"
         code, out = pecli(["train", "pursuer", "-c", "quick", "--zoo", str(base.parent), "--name", "base",
                            "--steps", "300", *TINY], env)
-        assert code == 0, out
-        if "inputs" in args.only:
-            outcomes += bad_inputs(work, env, base)
-        if "nan" in args.only:
-            outcomes += nan_policies(work, environment(args.source), base)
-        if "kills" in args.only:
-            outcomes += kills(work, environment(args.source, work), args.tries)
-        if "writers" in args.only:
-            outcomes += writers(work, env, base, args.tries)
-    print(f"| part | case | exit | error lines | verdict | message |\n|---|---|---|---|---|---|")
-    for o in outcomes:
-        print(f"| {o.part} | {o.case} | {o.exit_code} | {o.error_lines} | {o.verdict} | {o.detail.replace('|', '/')} |")
+        if code != 0:
+            raise SystemExit(f"cannot train the base run: {out}")
+        parts = {"inputs": lambda: bad_inputs(work, env, base), "nan": lambda: nan_policies(work, env, base),
+                 "kills": lambda: kills(work, environment(args.source, work), args.tries),
+                 "writers": lambda: writers(work, env, base, args.tries)}
+        for name in args.only:
+            for o in parts[name]():
+                outcomes.append(o)
+                print(f"| {o.part} | {o.case} | {o.exit_code} | {o.error_lines} | {o.verdict} | "
+                      f"{o.detail.replace('|', '/')} |", flush=True)
+            write(outcomes, args.out)
+    print(json.dumps(write(outcomes, args.out), indent=1))
+
+
+def write(outcomes: list[Outcome], path: Path) -> dict[str, dict[str, int]]:
+    """Write the outcomes and their counts per part and verdict to ``path``; returns the counts."""
     summary: dict[str, dict[str, int]] = {}
     for o in outcomes:
         part = summary.setdefault(o.part, {})
         part[o.verdict] = part.get(o.verdict, 0) + 1
-    print(json.dumps(summary, indent=1))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"summary": summary, "outcomes": [asdict(o) for o in outcomes]}, indent=1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"summary": summary, "outcomes": [asdict(o) for o in outcomes]}, indent=1))
+    return summary
 
 
 if __name__ == "__main__":

@@ -216,10 +216,17 @@ class SelfPlay(_Model):
     against opponents drawn from the other side's pool."""
 
     rounds: Count = Field(default=10, ge=1, le=100_000, description="rounds; a round trains each side once")
-    steps_per_round: Count = Field(default=50_000, ge=1, le=MAX_STEPS, description="learner transitions per side per round")
-    opponents: Literal["latest", "uniform", "pfsp"] = Field(
+    steps_per_round: Count = Field(default=50_000, ge=1, le=MAX_STEPS,
+                                  description="learner transitions per side per round")
+    schedule: Literal["alternating", "simultaneous"] = Field(
+        default="alternating",
+        description="alternating: one side trains at a time against the other's pool; simultaneous: both "
+        "learners in the same games, both learning every step (the paper's MADDPG)",
+    )
+    opponents: Literal["latest", "uniform", "pfsp", "league"] = Field(
         default="pfsp",
-        description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win",
+        description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win; "
+        "league: pfsp with exploiters and the scripted players kept in the pool (AlphaStar's league)",
     )
     pfsp_power: Real = Field(default=2.0, gt=0, description="(ours) PFSP weight = P(opponent wins)^power")
     pfsp_prior_episodes: Real = Field(
@@ -228,6 +235,19 @@ class SelfPlay(_Model):
     pfsp_decay: Real = Field(
         default=0.5, ge=0, le=1, description="(ours) share of an opponent's record kept when the learner moves on a round"
     )
+    league_floor: Real = Field(
+        default=0.2, ge=0, le=1, description="(ours) league: the share of games the scripted players keep, together"
+    )
+    exploiter_join: Real = Field(
+        default=0.5, gt=0, le=1,
+        description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",
+    )
+
+    @model_validator(mode="after")
+    def _league_alternates(self) -> SelfPlay:
+        if self.opponents == "league" and self.schedule != "alternating":
+            raise ValueError("opponents 'league' needs the alternating schedule (the simultaneous one has no pools)")
+        return self
 
 
 class Training(_Model):
@@ -237,12 +257,15 @@ class Training(_Model):
     belief: Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"] = Field(
         default="none", description="what the actor adds to its observation about the unseen opponent"
     )
-    steps: Count = Field(default=1_000_000, ge=1, le=MAX_STEPS, description="budget in learner transitions (all envs together)")
+    steps: Count = Field(default=1_000_000, ge=1, le=MAX_STEPS,
+                         description="budget in learner transitions (all envs together)")
     n_envs: Count = Field(default=8, ge=1, le=MAX_COUNT, description="games stepped together in one process")
     frame_skip: Count = Field(default=2, ge=1, le=1000, description="game steps each action is held for")
     frame_stack: Count = Field(default=2, ge=1, le=1000, description="observations stacked into the actor's input")
-    history_length: Count = Field(default=200, ge=1, le=MAX_HISTORY, description="game steps the belief window looks back")
-    history_stride: Count = Field(default=10, ge=1, le=MAX_HISTORY, description="keep every k-th step of the window (10: 1 Hz)")
+    history_length: Count = Field(default=200, ge=1, le=MAX_HISTORY,
+                                  description="game steps the belief window looks back")
+    history_stride: Count = Field(default=10, ge=1, le=MAX_HISTORY,
+                                  description="keep every k-th step of the window (10: 1 Hz)")
     reward_scale: Real = Field(default=0.001, gt=0, description="rewards are multiplied by this for learning")
     learning_rate: Real = Field(default=5e-4, gt=0)
     buffer_size: Count = Field(default=100_000, ge=1, le=MAX_BUFFER)
@@ -253,13 +276,15 @@ class Training(_Model):
     net_arch: list[Annotated[Count, Field(ge=1, le=MAX_WIDTH)]] = Field(
         default=[128, 128], min_length=1, max_length=MAX_DEPTH, description="hidden layer widths of actor and critics"
     )
-    learning_starts: Count = Field(default=5_000, ge=0, le=MAX_STEPS, description="transitions collected before learning")
+    learning_starts: Count = Field(default=5_000, ge=0, le=MAX_STEPS,
+                                   description="transitions collected before learning")
     train_freq: Count = Field(default=1, ge=1, le=MAX_COUNT, description="vector-env steps between updates")
     gradient_steps: Count = Field(default=2, ge=1, le=10_000, description="gradient steps per update")
     checkpoint_every: Count = Field(default=250, ge=1, le=MAX_COUNT, description="episodes between zoo checkpoints")
     eval_every: Count = Field(default=0, ge=0, le=MAX_STEPS, description="transitions between evaluations; 0: none")
     eval_episodes: Count = Field(default=200, ge=1, le=MAX_GAMES)
-    torch_threads: Count = Field(default=1, ge=1, le=1024, description="torch threads per process (1 is fastest on a shared CPU)")
+    torch_threads: Count = Field(default=1, ge=1, le=1024,
+                                 description="torch threads per process (1 is fastest on a shared CPU)")
     curriculum: Curriculum = Curriculum()
     belief_settings: BeliefSettings = BeliefSettings()
     selfplay: SelfPlay = SelfPlay()
@@ -398,7 +423,8 @@ def _mlp_parameters(sizes: list[int]) -> int:
 
 
 def memory_estimate(scenario: Scenario) -> dict[str, int]:
-    """Roughly the bytes one training process of ``scenario`` allocates, by the setting that decides each part.
+    """Roughly the bytes one learner of ``scenario`` allocates, by the setting that decides each part
+    (``pecli selfplay`` holds two learners in one process: about twice this).
 
     ``training.n_envs``: the batched games with their frame stacks and history windows (about 1.5 KiB
     per game besides the windows, measured); ``training.buffer_size``: SB3's replay buffer (float32
@@ -451,8 +477,8 @@ def check_resources(scenario: Scenario, source: str = "<dict>") -> None:
         for part in key.split(".")[1:]:
             value = getattr(value, part)
         what = f"{value} {_UNITS[key]}" if key in _UNITS else str(value)
-        raise ConfigError(f"{source}: {key}: {what} need {_size(estimate[key])} (a training process of this scenario needs "
-                          f"{_size(total)} in all; the limit is {_size(MEMORY_LIMIT)})")
+        raise ConfigError(f"{source}: {key}: {what} need {_size(estimate[key])} (a training process of this "
+                          f"scenario needs {_size(total)} in all; the limit is {_size(MEMORY_LIMIT)})")
 
 
 def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:

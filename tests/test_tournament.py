@@ -231,3 +231,9 @@ def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick:
     result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1", "--workers", "1",
                                  "--out", str(out)])
     assert result.exit_code == 0, result.output
+
+
+def test_an_impossible_batch_is_refused_before_it_is_allocated(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "10000000000", "--seeds", "1",
+                                 "-w", "1", "--out", str(tmp_path / "t")])
+    assert result.exit_code == 1 and "more than a pairing can play as one batch" in result.output

@@ -14,6 +14,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from pecli.cli.common import console, err_console, one_torch_thread, require_positive, scenario_for, user_errors
 from pecli.errors import PecliError
 
+MAX_EPISODES = 1_000_000  # per seed and pairing: they are played as one batched game
+
 
 @user_errors
 def tournament(
@@ -56,6 +58,9 @@ def tournament(
     from pecli.tournament import find_players, run_tournament, schedule
 
     require_positive(episodes, "--episodes")
+    if episodes > MAX_EPISODES:
+        raise PecliError(f"--episodes {episodes} is more than a pairing can play as one batch (at most {MAX_EPISODES:,}"
+                         " per seed, about 1.5 KiB each): add --seeds instead")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []

@@ -94,7 +94,8 @@ def judge(part: str, case: str, code: int, output: str) -> Outcome:
         verdict = "accepted"
     else:
         verdict = "internal error"
-    return Outcome(part, case, code, len(errors), verdict, (errors[0] if errors else output.strip()[-160:])[:200])
+    last = [line.strip() for line in output.splitlines() if line.strip()][-1:] or [""]
+    return Outcome(part, case, code, len(errors), verdict, (errors[0] if errors else last[0])[:200])
 
 
 # -- bad inputs ------------------------------------------------------------------------------------------------
@@ -156,6 +157,9 @@ def bad_inputs(work: Path, env: dict[str, str], base: Path) -> list[Outcome]:
         code, out = pecli(["train", "pursuer", "-c", "quick", "--zoo", str(zoo), "--name", f"s{i}", *budget,
                            "--set", item, "-q"], env)
         outcomes.append(judge("inputs", f"--set {item}", code, out))
+    for command in (["tournament", "--baselines", "--seeds", "1", "-w", "1", "--out", str(work / "huge")], ["play"]):
+        code, out = pecli([*command, "-c", "quick", "--episodes", "10000000000"], env)
+        outcomes.append(judge("inputs", f"{command[0]} --episodes 10^10", code, out))
     for name in ["../../escape", "/tmp/pecli-bench-escape", "a/b", ".", "..", ".hidden", "a b"]:
         for command in (["train", "pursuer", "--steps", "20"], ["selfplay", "--rounds", "1", "--steps-per-round", "20"]):
             code, out = pecli([*command, "-c", "quick", "--zoo", str(work / "deep" / "zoo"), "--name", name, *TINY], env)
@@ -286,7 +290,7 @@ def nan_policies(work: Path, env: dict[str, str], base: Path) -> list[Outcome]:
                            "--set", "learning_rate=1e30"], env)
         total, broken = non_finite_checkpoints(zoo)
         outcome = judge("nan", f"{command[0]} --set learning_rate=1e30", code, out)
-        outcome.detail = f"{total} checkpoints written, {broken} with NaN weights; {outcome.detail}"
+        outcome.detail = f"{total} checkpoints written, {broken} with NaN weights; {outcome.detail}"[:200]
         outcome.verdict = f"{broken} NaN written, " + outcome.verdict
         outcomes.append(outcome)
     poisoned = base / "pursuer" / "poisoned.zip"

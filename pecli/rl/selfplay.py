@@ -43,7 +43,7 @@ from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, PoolTracker, ProgressDisplay, RoundDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, FiniteCheck, PoolTracker, ProgressDisplay, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
@@ -367,8 +367,9 @@ class SelfPlay:
         target = int(learners["pursuer"].model.num_timesteps) + max(remaining, 0)
         display = ProgressDisplay(stats["pursuer"], target, title, enabled=self.job.progress)
         callbacks = {
-            "pursuer": [*learners["pursuer"].callbacks, stats["pursuer"], display],
-            "evader": [c for c in learners["evader"].callbacks if c is not learners["evader"].curriculum] + [stats["evader"]],
+            "pursuer": [FiniteCheck(), *learners["pursuer"].callbacks, stats["pursuer"], display],
+            "evader": [FiniteCheck()] + [c for c in learners["evader"].callbacks if c is not learners["evader"].curriculum]
+            + [stats["evader"]],
         }
         try:
             if remaining > 0:
@@ -455,7 +456,7 @@ class SelfPlay:
         try:
             try:
                 if remaining > 0:
-                    model.learn(remaining, callback=CallbackList([*learner.callbacks, tracker, display]),
+                    model.learn(remaining, callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
                                 reset_num_timesteps=False, tb_log_name=role)
             finally:
                 display.close()

@@ -26,12 +26,12 @@ from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.durable import DurableState
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run
+from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -283,7 +283,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
             next_checkpoint = (total // t.checkpoint_every + 1) * t.checkpoint_every
 
     stats.listeners.append(checkpoint)
-    callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
+    callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)
@@ -348,4 +348,4 @@ def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable
 
 def default_run_name(what: str, scenario: Scenario, seed: int) -> str:
     """``<scenario>-<what>-s<seed>-<yyyymmdd-hhmmss>``, ``what`` a role or ``selfplay``."""
-    return f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return safe_run_name(f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}")

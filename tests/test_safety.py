@@ -140,7 +140,10 @@ def test_edited_metadata_is_one_clear_line(zoo: Path, tmp_path: Path) -> None:
     ):
         meta_path.write_text(json.dumps({**original, **change}))
         for command in (["play", "-p", str(meta_path.with_suffix(".zip")), "-e", "greedy", "-n", "2"],
-                        ["export", "onnx", str(meta_path.with_suffix(".zip")), "--out", str(tmp_path / "x.onnx")]):
+                        ["export", "onnx", str(meta_path.with_suffix(".zip")), "--out", str(tmp_path / "x.onnx")],
+                        ["zoo", "show", str(meta_path.with_suffix(".zip"))],
+                        ["tournament", str(meta_path.with_suffix(".zip")), "greedy", "--episodes", "2", "--seeds", "1",
+                         "--workers", "1", "--out", str(tmp_path / "t")]):
             result = runner.invoke(app, command)
             assert result.exit_code == 1 and message in result.output, (change, command, result.output)
             assert "Traceback" not in result.output and "internal error" not in result.output

@@ -5,13 +5,17 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
 from pecli.errors import PecliError
+
+if TYPE_CHECKING:
+    from pecli.scenario import Scenario
+    from pecli.zoo import CheckpointMeta
 
 app = typer.Typer(help="List, show, remove and pick checkpoints of a zoo.", no_args_is_help=True)
 
@@ -50,14 +54,54 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
 @app.command("show")
 @user_errors
 def show(checkpoint: Annotated[Path, typer.Argument(help="A checkpoint file (.zip).")]) -> None:
-    """Print a checkpoint's metadata (and lineage, for self-play checkpoints) as JSON."""
+    """Print a checkpoint's metadata (and lineage, for self-play checkpoints) as JSON.
+
+    The metadata is checked against the network it describes first (when the checkpoint's scenario
+    is at hand: its run's config.yaml, or the built-in it names); a mismatch is refused.
+    """
     from pecli.zoo import checkpoint_problem, read_metadata
 
     if not checkpoint.is_file():
         raise PecliError(f"no checkpoint at {checkpoint}")
     if problem := checkpoint_problem(checkpoint, thorough=True):
         raise PecliError(f"{checkpoint}: {problem}")
-    console.print_json(json.dumps(read_metadata(checkpoint).to_dict()))
+    meta = read_metadata(checkpoint)
+    _check_network(checkpoint, meta)
+    console.print_json(json.dumps(meta.to_dict()))
+
+
+def _check_network(checkpoint: Path, meta: CheckpointMeta) -> None:
+    """Refuse a checkpoint whose weights do not fit the network its metadata describes; say on stderr
+    when that cannot be checked."""
+    if not meta.policy_kwargs:
+        err_console.print(f"note: {checkpoint} predates network metadata; its network was not checked", highlight=False)
+        return
+    scenario = _scenario_of(checkpoint, meta)
+    if scenario is None:
+        err_console.print(f"note: the scenario of {checkpoint} ('{meta.scenario}') is not at hand; its network was "
+                          "not checked", highlight=False)
+        return
+    from pecli.rl.checkpoint import load_policy
+
+    load_policy(checkpoint, meta, scenario)  # ZooError: one line naming the first difference
+
+
+def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:
+    """The scenario ``checkpoint`` was trained on: its run's ``config.yaml``, else the built-in scenario
+    of its name, if the fingerprint matches; ``None`` otherwise."""
+    from pecli.scenario import builtin_names, load_scenario
+
+    candidates: list[str | Path] = [checkpoint.resolve().parent.parent / "config.yaml"]
+    if meta.scenario in builtin_names():
+        candidates.append(meta.scenario)
+    for candidate in candidates:
+        try:
+            scenario = load_scenario(candidate)
+        except PecliError:
+            continue
+        if scenario.fingerprint() == meta.scenario_hash:
+            return scenario
+    return None
 
 
 @app.command("rm")

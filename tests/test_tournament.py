@@ -236,4 +236,6 @@ def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick:
 def test_an_impossible_batch_is_refused_before_it_is_allocated(tmp_path: Path) -> None:
     result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "10000000000", "--seeds", "1",
                                  "-w", "1", "--out", str(tmp_path / "t")])
-    assert result.exit_code == 1 and "more than a pairing can play as one batch" in result.output
+    assert result.exit_code == 1 and "more than one batch can play" in result.output
+    played = runner.invoke(app, ["play", "-p", "pure-pursuit", "-e", "greedy", "-c", "quick", "-n", "10000000000"])
+    assert played.exit_code == 1 and "more than one batch can play" in played.output and "Traceback" not in played.output

@@ -97,6 +97,19 @@ def require_positive(value: int, name: str) -> int:
     return value
 
 
+MAX_EPISODES = 1_000_000  # per batch: episodes played at once are one batched game
+
+
+def require_batch(episodes: int, hint: str) -> int:
+    """``episodes`` (``--episodes``) if a positive count that fits one batched game, else one line ending
+    in ``hint``, what to do instead."""
+    require_positive(episodes, "--episodes")
+    if episodes > MAX_EPISODES:
+        raise PecliError(f"--episodes {episodes} is more than one batch can play (at most {MAX_EPISODES:,} at once, "
+                         f"about 1.5 KiB each): {hint}")
+    return episodes
+
+
 def scenario_for(players: list[str], config: str | None, folders: bool = False) -> Scenario:
     """The ``--config`` scenario, else the one the first of ``players`` records (a checkpoint's run, an
     export's sidecar; with ``folders``, the first run found under a folder), else the paper's."""

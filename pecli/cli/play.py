@@ -16,7 +16,7 @@ from pecli.cli.common import (
     console,
     err_console,
     one_torch_thread,
-    require_positive,
+    require_batch,
     scenario_for,
     user_errors,
 )
@@ -49,7 +49,7 @@ def play(
     The time-to-capture is normalised by the horizon T; a timeout counts 1.0.
     Episode i under one seed always starts from the same state, whoever plays it.
     """
-    require_positive(episodes, "--episodes")
+    require_batch(episodes, "play fewer (a tournament plays more over several --seeds)")
     if render is not None and render.suffix.lower() not in (".png", ".gif"):
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
     if render is not None:

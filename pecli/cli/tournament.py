@@ -11,10 +11,9 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from pecli.cli.common import console, err_console, one_torch_thread, require_positive, scenario_for, user_errors
+from pecli.cli.common import console, err_console, one_torch_thread, require_batch, require_positive, scenario_for, user_errors
 from pecli.errors import PecliError
 
-MAX_EPISODES = 1_000_000  # per seed and pairing: they are played as one batched game
 
 
 @user_errors
@@ -57,10 +56,7 @@ def tournament(
     from pecli.reports import ratings_table, results_table, write_reports
     from pecli.tournament import find_players, run_tournament, schedule
 
-    require_positive(episodes, "--episodes")
-    if episodes > MAX_EPISODES:
-        raise PecliError(f"--episodes {episodes} is more than a pairing can play as one batch (at most {MAX_EPISODES:,}"
-                         " per seed, about 1.5 KiB each): add --seeds instead")
+    require_batch(episodes, "add --seeds instead")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []

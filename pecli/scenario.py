@@ -339,11 +339,16 @@ def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
-        errors = exc.errors()
-        first = errors[0]
-        where = _location(first)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-        raise ConfigError(f"{source}: {where or 'top level'}: {_describe(first)}{more}") from None
+        raise ConfigError(validation_message(exc, source)) from None
+
+
+def validation_message(exc: ValidationError, source: str) -> str:
+    """One line for a pydantic error: ``<source>: <key.path>: <problem> (and N more problems)``."""
+    errors = exc.errors()
+    first = errors[0]
+    where = _location(first)
+    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    return f"{source}: {where or 'top level'}: {_describe(first)}{more}"
 
 
 def load_scenario(path_or_name: str | Path) -> Scenario:

@@ -4,6 +4,7 @@ experiment file, executed on Ray."""
 from __future__ import annotations
 
 import signal
+import socket
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -31,20 +32,30 @@ def _minutes(seconds: float) -> str:
 
 
 def runs_table(rows: list[RunStatus], title: str) -> Table:
-    """One row per run: kind, seed, schedule, round, transitions, CPU time, status, host."""
+    """One row per run: kind, seed, schedule (when the grid has several), round, transitions, CPU time,
+    status, and the host it runs on (when another machine ran any)."""
+    schedules = len({row.run.schedule for row in rows}) > 1
+    hosts = any(row.host not in ("", socket.gethostname()) for row in rows)
     table = Table(title=title, title_justify="left")
-    for column, justify in (("run", "left"), ("kind", "left"), ("seed", "right"), ("schedule", "left"),
-                            ("round", "right"), ("transitions", "right"), ("CPU time", "right"),
-                            ("status", "left"), ("host", "left")):
-        table.add_column(column, justify=justify, overflow="fold")
+    table.add_column("run", no_wrap=True)
+    table.add_column("kind", no_wrap=True)
+    table.add_column("seed", justify="right")
+    if schedules:
+        table.add_column("schedule", no_wrap=True)
+    for column in ("round", "steps", "CPU time"):
+        table.add_column(column, justify="right", no_wrap=True)
+    table.add_column("status", overflow="fold", min_width=7)
+    if hosts:
+        table.add_column("host", no_wrap=True)
     for row in rows:
         p = row.progress
         where = f"{p.round}/{p.rounds}" + (f" {p.role}" if p.role and row.status == "running" else "") if p.rounds else "-"
         status = f"[{STATUS_STYLE.get(row.status, '')}]{row.status}[/]"
         if row.error:
             status += f": {row.error}"
-        table.add_row(row.run.name, row.run.kind, str(row.run.seed), row.run.schedule, where, f"{p.steps:,}",
-                      _minutes(p.cpu_seconds), status, row.host)
+        cells = [row.run.name, row.run.kind, str(row.run.seed), *([row.run.schedule] if schedules else []), where,
+                 f"{p.steps:,}", _minutes(p.cpu_seconds), status, *([row.host] if hosts else [])]
+        table.add_row(*cells)
     return table
 
 
@@ -90,13 +101,14 @@ def run(
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
+    previous = signal.getsignal(signal.SIGTERM)
     runner = ExperimentRunner(loaded, out, on_update=update)
     again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
     try:
         if live is not None:
             live.start()
         with RayCluster(address=address, cpus=cpus) as cluster:
+            signal.signal(signal.SIGTERM, interrupt)  # after ray.init, which installs a handler of its own
             where = (f"embedded Ray, {cluster.total_cpus()} CPUs" if cluster.embedded else
                      f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs")
             err_console.print(f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; "

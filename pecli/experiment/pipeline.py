@@ -44,6 +44,7 @@ STATE_FILE = "experiment.json"
 KEPT_FILE = "kept.json"
 POLL_SECONDS = 1.0
 GRACE_SECONDS = 30.0  # after Ctrl-C, how long running runs get to commit their state
+RAY_LOGS = "/tmp/ray/session_latest/logs"  # where embedded Ray writes its logs (workers' tracebacks)
 
 
 @dataclass
@@ -123,6 +124,8 @@ def statuses(experiment: LoadedExperiment, out: Path) -> list[RunStatus]:
             status = "done"
         elif status in ("running", "queued") and not alive:
             status = "stopped"
+        elif status == "queued" and marker.get("started", 0) >= state["driver"].get("started", float("inf")):
+            status = "running"
         row = RunStatus(run, progress, status, record.get("error", ""), host=marker.get("host", ""))
         rows.append(row)
     return rows
@@ -177,7 +180,8 @@ class ExperimentRunner:
             "name": spec.name,
             "fingerprint": spec.fingerprint(),
             "source": self.experiment.source,
-            "driver": {"pid": os.getpid(), "host": socket.gethostname(), "ended": ended},
+            "driver": {"pid": os.getpid(), "host": socket.gethostname(), "started": self.session.started,
+                       "ended": ended},
             "runs": {row.run.name: {"status": row.status, "error": row.error, "host": row.host}
                      for row in self.rows},
             "stages": self.stages,
@@ -195,9 +199,8 @@ class ExperimentRunner:
         self._prepare()
         try:
             self._train(cluster)
-            kept = self._rank(cluster)
-            results = self._tournament(cluster, kept)
-            path = self._report(results)
+            self._tournament(cluster, self._rank(cluster))
+            path = self._report()
         except KeyboardInterrupt:
             self.session.ended = "interrupted"
             self._save(ended="interrupted")
@@ -230,8 +233,9 @@ class ExperimentRunner:
                         outcome = cluster.result(ref)
                     except PecliError as exc:
                         row.status, row.error = "failed", str(exc)
-                    except Exception as exc:  # a bug in the task: keep the others going, report it after
-                        row.status, row.error = "failed", f"{type(exc).__name__}: {exc}"
+                    except Exception as exc:  # a bug, or a worker lost more often than Ray retries: keep the others going
+                        row.status = "failed"
+                        row.error = f"{type(exc).__name__}: {exc} (its traceback is in Ray's logs, {RAY_LOGS})"
                     else:
                         row.status = "done"
                         if outcome["did"] == "started":
@@ -240,11 +244,14 @@ class ExperimentRunner:
                             self.session.runs_resumed += 1
                     row.progress = run_progress(row.run, self.zoo)
                     self._save()
+                started = False
                 for row in pending.values():
                     row.progress = run_progress(row.run, self.zoo)
                     marker = _read_marker(self.out, row.run)
-                    if marker.get("started", 0) >= row.submitted - 1:
-                        row.status, row.host = "running", marker.get("host", "")
+                    if row.status == "queued" and marker.get("started", 0) >= row.submitted - 1:
+                        row.status, row.host, started = "running", marker.get("host", ""), True
+                if started:
+                    self._save()
                 self._update("training")
         except KeyboardInterrupt:
             running = [ref for ref, row in pending.items() if row.status == "running"]
@@ -314,7 +321,7 @@ class ExperimentRunner:
         write_reports(results, self.out / "tournament")
         return results
 
-    def _report(self, results: TournamentResults) -> Path:
+    def _report(self) -> Path:
         from pecli.experiment.report import write_report
 
         self._update("report")

@@ -32,6 +32,7 @@ from pecli.io import atomic_write_json
 from pecli.tournament import PairingJob, PairingResult, play_pairing
 
 OBJECT_STORE_BYTES = 200 * 1024**2  # embedded Ray: runs and pairings pass small objects only
+WORKER_NICENESS = "RAY_worker_niceness"  # Ray's setting of the niceness its workers add to the raylet's
 RETRIES = 3  # a task whose worker or node died is run again (it continues from its durable state)
 
 
@@ -78,9 +79,14 @@ class RayCluster:
     def __enter__(self) -> RayCluster:
         if ray.is_initialized():  # e.g. a test connected to its own cluster already
             return self
-        options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+        options: dict[str, Any] = {"log_to_driver": False}  # the runs' output stays in Ray's logs
+        if not (self.address or "").startswith("ray://"):  # Ray Client passes these on to the remote driver
+            options.update(include_dashboard=False, configure_logging=False)
         if self.address is None:
             options.update(num_cpus=self.cpus or os.cpu_count() or 1, object_store_memory=OBJECT_STORE_BYTES)
+            # Ray starts its workers 15 steps nicer than itself; the runs are the work, so they run at the
+            # driver's priority (`nice -n 10 pecli experiment run ...` puts them at 10)
+            os.environ.setdefault(WORKER_NICENESS, "0")
         try:
             ray.init(address=self.address, **options)
         except (ConnectionError, RayError, ValueError, RuntimeError) as exc:

@@ -199,6 +199,8 @@ def experiment_from_dict(data: object, source: str, base: Path | None = None) ->
         scenario = load_scenario(scenario_path if scenario_path.suffix in (".yaml", ".yml") else spec.scenario)
     except PecliError as exc:
         raise ConfigError(f"{source}: scenario: {exc}") from None
+    if scenario_path.is_file():  # a scenario file: recorded by its absolute path, read from wherever --out is
+        spec = spec.model_copy(update={"scenario": str(scenario_path.resolve())})
     scenario = with_overrides(scenario, _flatten(dict(spec.training)), source=source)
     return LoadedExperiment(spec, scenario, source)
 

@@ -144,3 +144,26 @@ def test_edited_metadata_is_one_clear_line(zoo: Path, tmp_path: Path) -> None:
             result = runner.invoke(app, command)
             assert result.exit_code == 1 and message in result.output, (change, command, result.output)
             assert "Traceback" not in result.output and "internal error" not in result.output
+
+
+def test_a_payload_in_the_durable_state_is_refused(tmp_path: Path) -> None:
+    import io
+
+    import numpy as np
+
+    tiny = ["--set", "buffer_size=400", "--set", "batch_size=16", "--set", "learning_starts=50", "--set",
+            "net_arch=[16,16]", "--set", "n_envs=2", "--set", "checkpoint_every=2"]
+    start = ["train", "pursuer", "-c", "quick", "--steps", "300", "--name", "r", "--zoo", str(tmp_path), "-q", *tiny]
+    assert runner.invoke(app, start).exit_code == 0
+    marker = tmp_path / "ran"
+    chunk = sorted((tmp_path / "r" / "pursuer" / "resume").glob("replay-*.npz"))[-1]
+    with np.load(chunk) as data:
+        arrays = {key: data[key] for key in data.files}
+    arrays["actions"] = np.array([Payload(marker)] * len(arrays["actions"]), dtype=object)
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    chunk.write_bytes(buffer.getvalue())
+    result = runner.invoke(app, ["train", "pursuer", "--name", "r", "--zoo", str(tmp_path), "--resume", "-q",
+                                 "--steps", "400"])
+    assert result.exit_code == 1 and "buffer files hold pickled objects" in result.output
+    assert not marker.exists()

@@ -241,3 +241,12 @@ def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
     ours, theirs = (read_weights(tmp_path / zoo / "run" / "pursuer" / "final.zip")[0] for zoo in ("a", "b"))
     for key, value in ours["policy"].items():
         assert th.equal(value, theirs["policy"][key]), key
+
+
+def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> None:
+    from pecli.rl.train import forget_evaluations_after
+
+    log = tmp_path / "eval_pursuer.csv"
+    log.write_text("steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n300,3.0,3.0,0.6\n30")
+    forget_evaluations_after(log, 200)  # evaluated at 300 after the commit at 200, then killed mid-line
+    assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"

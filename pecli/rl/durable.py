@@ -32,6 +32,7 @@ import numpy as np
 import torch as th
 
 from pecli.io import atomic_path, atomic_write_json
+from pecli.trust import untrusted
 from pecli.zoo import ZooError
 
 RECORD = "state.json"
@@ -203,7 +204,11 @@ class DurableState:
                 if record.belief_optimizer:
                     path = self.directory / record.belief_optimizer
                     fit.optimizer.load_state_dict(load_tensors(path, path))
-        except (OSError, ValueError, KeyError, RuntimeError) as exc:  # a truncated array, another buffer size
+        except ValueError as exc:
+            if "allow_pickle" in str(exc):  # an object array: only unpickling could read it
+                raise untrusted(self.directory, "its buffer files hold pickled objects, not plain arrays") from None
+            raise ZooError(f"cannot restore {self.directory}: {exc}") from None
+        except (OSError, KeyError, RuntimeError) as exc:  # a truncated array, another buffer size
             raise ZooError(f"cannot restore {self.directory}: {type(exc).__name__}: {exc}") from None
         self.record = record
 

@@ -150,7 +150,7 @@ def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
     sp = scenario.training.selfplay
     pools = {role: OpponentPool(role) for role in ROLES}
     for role in ROLES:
-        for name in builtin_names(role):
+        for name in builtin_names(role, paper_only=True):
             pools[role].add(name, name, generation=0)
     return SelfPlayState(seed=seed, curriculum_steps=sp.rounds * sp.steps_per_round, pools=pools)
 

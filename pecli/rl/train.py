@@ -19,6 +19,7 @@ import yaml
 from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
+from pecli.io import atomic_write_text
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
@@ -252,6 +253,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         durable.restore(record, model, fit)
         model.set_random_seed(resume_seed(job.seed, record.steps))
         episodes, cpu_before = record.episodes, record.cpu_seconds
+        forget_evaluations_after(run.path / f"eval_{job.role}.csv", record.steps)
     if on_start is not None:
         on_start(run)
 
@@ -313,6 +315,20 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         if logger is not None:
             logger.close()
     return commit(stats.episodes, FINAL)
+
+
+def forget_evaluations_after(log: Path, steps: int) -> None:
+    """Drop the rows of an evaluation log past ``steps``: a run stopped after them resumes from before."""
+    if not log.is_file():
+        return
+    lines = log.read_text().splitlines(keepends=True)
+    def before(line: str) -> bool:  # a whole row (a kill can leave half of one) written at most at ``steps``
+        first = line.split(",", 1)[0]
+        return line.endswith("\n") and first.isdigit() and int(first) <= steps
+
+    kept = lines[:1] + [line for line in lines[1:] if before(line)]
+    if len(kept) < len(lines):
+        atomic_write_text(log, "".join(kept))
 
 
 def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable[[str], None]) -> None:

@@ -16,6 +16,7 @@ experiment's ``--out`` folder at the same path (a shared file system) and have p
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import time
 from collections.abc import Iterator, Sequence
@@ -46,6 +47,9 @@ def _one_thread() -> None:
 def _run_task(run: RunSpec, zoo: str, marker: str) -> dict[str, Any]:
     """Train one run (:func:`execute_run`); ``marker`` records where and since when it runs."""
     _one_thread()
+    # ray.cancel stops a running task as Ctrl-C would (the run commits its state), by simulating SIGINT in the
+    # worker: that does nothing if the worker inherited SIGINT ignored (a driver started in the background)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     atomic_write_json(marker, {"host": socket.gethostname(), "pid": os.getpid(), "started": time.time(),
                                "node": ray.get_runtime_context().get_node_id()})
     return execute_run(run, Path(zoo))

@@ -175,9 +175,15 @@ class SelfPlay(_Model):
 
     rounds: int = Field(default=10, ge=1, description="rounds; a round trains each side once")
     steps_per_round: int = Field(default=50_000, ge=1, description="learner transitions per side per round")
-    opponents: Literal["latest", "uniform", "pfsp"] = Field(
+    schedule: Literal["alternating", "simultaneous"] = Field(
+        default="alternating",
+        description="alternating: one side trains at a time against the other's pool; simultaneous: both "
+        "learners in the same games, both learning every step (the paper's MADDPG)",
+    )
+    opponents: Literal["latest", "uniform", "pfsp", "league"] = Field(
         default="pfsp",
-        description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win",
+        description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win; "
+        "league: pfsp with exploiters and the scripted players kept in the pool (AlphaStar's league)",
     )
     pfsp_power: float = Field(default=2.0, gt=0, description="(ours) PFSP weight = P(opponent wins)^power")
     pfsp_prior_episodes: float = Field(
@@ -186,6 +192,19 @@ class SelfPlay(_Model):
     pfsp_decay: float = Field(
         default=0.5, ge=0, le=1, description="(ours) share of an opponent's record kept when the learner moves on a round"
     )
+    league_floor: float = Field(
+        default=0.2, ge=0, le=1, description="(ours) league: the share of games the scripted players keep, together"
+    )
+    exploiter_join: float = Field(
+        default=0.5, gt=0, le=1,
+        description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",
+    )
+
+    @model_validator(mode="after")
+    def _league_alternates(self) -> SelfPlay:
+        if self.opponents == "league" and self.schedule != "alternating":
+            raise ValueError("opponents 'league' needs the alternating schedule (the simultaneous one has no pools)")
+        return self
 
 
 class Training(_Model):

@@ -55,14 +55,15 @@ class CurriculumCallback(BaseCallback):
 
 
 class EpisodeStats(BaseCallback):
-    """Counts finished episodes and captures from the view's ``infos``; logs the recent capture rate.
+    """Counts finished episodes and captures from the view's ``infos`` (from ``episodes`` and ``captures``
+    on); logs the recent capture rate.
 
     ``on_episodes(total)`` is called whenever episodes finish (checkpointing hooks in there).
     """
 
-    def __init__(self, episodes: int = 0, window: int = 100) -> None:
+    def __init__(self, episodes: int = 0, window: int = 100, captures: int = 0) -> None:
         super().__init__()
-        self.episodes = episodes
+        self.episodes, self.captures = episodes, captures
         self.recent: deque[bool] = deque(maxlen=window)
         self.listeners: list[Callable[[int], None]] = []
 
@@ -75,6 +76,7 @@ class EpisodeStats(BaseCallback):
         if finished:
             self.recent.extend(finished)
             self.episodes += len(finished)
+            self.captures += sum(finished)
             self.logger.record("pecli/capture_rate", self.capture_rate)
             self.logger.record("pecli/episodes", self.episodes)
             for listener in self.listeners:
@@ -239,6 +241,9 @@ class PoolTracker(BaseCallback):
             self.captures += int(info["captured"])
         if finished:
             self.logger.record("selfplay/capture_rate", self.capture_rate)
+            for name in {info["opponent"] for info in finished}:  # TensorBoard: the learner's record per opponent
+                episodes, entry_wins = self.per_opponent[name]
+                self.logger.record(f"selfplay/win_rate_vs/{name}", 1.0 - entry_wins / episodes)
             if self.weigh is not None:
                 self.opponent.weights = self.weigh(self.pool)
             for listener in self.listeners:

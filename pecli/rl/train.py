@@ -145,11 +145,14 @@ def _obs_dim(scenario: Scenario, role: Role) -> int:
     return ObservationCodec(scenario, role).dim
 
 
-def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | BeliefVecEnv:
-    """The batched learner view; with a belief, wrapped so that transitions carry its features."""
+def make_env(job: TrainJob, opponent: Any, seed: int, view: Any = None) -> Any:
+    """The batched learner view against ``opponent`` (or the given ``view``, such as one face of a
+    :class:`~wrappers.simultaneous.SimultaneousGame`); with a belief, wrapped so that transitions
+    carry its features."""
     t = job.scenario.training
     with_belief = t.belief != "none"
-    view = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=with_belief)
+    if view is None:
+        view = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=with_belief)
     if not with_belief:
         return view
     buffer = None

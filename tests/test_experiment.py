@@ -91,10 +91,21 @@ def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
 
 # -- on Ray ---------------------------------------------------------------------------------------------
 
-def ray_processes() -> list[str]:
-    """Ray's processes still alive that were started from this test session's process tree."""
+def ray_processes(group: int | None = None) -> list[str]:
+    """Ray's processes alive in process group ``group`` (default: this one's, where an embedded Ray starts its
+    GCS, raylet and agents; its workers end with the raylet), as ``ps`` lines ``pid ppid pgid args``."""
+    group = os.getpgrp() if group is None else group
     out = subprocess.run(["ps", "-eo", "pid,ppid,pgid,args"], capture_output=True, text=True).stdout
-    return [line for line in out.splitlines() if ("raylet" in line or "gcs_server" in line or "ray::" in line)]
+    return [line for line in out.splitlines()[1:] if int(line.split()[2]) == group
+            and ("raylet" in line or "gcs_server" in line or "ray::" in line)]
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
 
 
 def cached_pairings(out: Path) -> int:
@@ -107,7 +118,7 @@ def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
 
     experiment = load_experiment("smoke")
     out = tmp_path / "smoke"
-    before = set(ray_processes())
+    assert not ray_processes()
     with RayCluster(cpus=2) as cluster:
         assert cluster.total_cpus() == 2
         first = ExperimentRunner(experiment, out)
@@ -131,7 +142,7 @@ def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
     result = runner.invoke(app, ["experiment", "status", str(out)])
     assert result.exit_code == 0 and "2/2 runs done" in result.output
     time.sleep(1)
-    assert set(ray_processes()) <= before  # embedded Ray left nothing behind
+    assert not ray_processes()  # embedded Ray left nothing behind
 
 
 def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
@@ -152,8 +163,12 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
         driver.send_signal(signal.SIGKILL)  # the driver alone, as the OOM killer would
         driver.wait()
         time.sleep(2)
-        group = [line for line in ray_processes() if int(line.split()[2]) == driver.pid]
-        assert not [line for line in group if "raylet" in line or "gcs_server" in line]  # they died with it
+        assert not [line for line in ray_processes(driver.pid) if "raylet" in line or "gcs_server" in line]
+        workers = [json.loads(marker.read_text())["pid"] for marker in (out / "tasks").glob("*.json")]
+        deadline = time.monotonic() + 10
+        while any(alive(pid) for pid in workers):  # and so did the workers that ran the runs
+            assert time.monotonic() < deadline
+            time.sleep(0.5)
     finally:
         try:
             os.killpg(driver.pid, signal.SIGKILL)  # Ray's agents, which take ~90 s to notice on their own

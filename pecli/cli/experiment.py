@@ -74,10 +74,9 @@ def run(
                                              "runs/experiments/<name>); run again on it to continue.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live table.")] = False,
 ) -> None:
-    """Run an experiment: train its grid of runs, rank their checkpoints, play the final tournament and
-    write the report (Markdown, JSON, PNG) into [bold]--out[/].
+    """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
 
-    Each run is one Ray task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted
+    The report (Markdown, JSON, PNG) and everything else go to [bold]--out[/]. Each run is one Ray task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted
     (Ctrl-C, a killed driver, a lost worker), it continues with the same command: finished runs and
     played pairings are kept, unfinished runs continue from their last checkpoint.
     """

@@ -60,7 +60,7 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     planned = run.scenario.training.selfplay.rounds
     state = _read_json(folder / SELFPLAY_STATE) or {}
     turns = state.get("turns", [])
-    finished = {(t.get("round"), t.get("role")) for t in turns}
+    finished = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}  # not exploiters
     rounds = sum(all((r, role) in finished for role in run.roles) for r in range(1, planned + 1))
     cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
     done = rounds == planned

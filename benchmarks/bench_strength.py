@@ -87,13 +87,13 @@ def final_players(zoo: Path, scenario_name: str) -> dict[str, dict[str, Path]]:
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.config)
     scenario = load_scenario(args.config)
-    specs = [str(p) for latest in runs.values() for p in latest.values()]
-    found = find_players([*specs, *HEURISTIC_EVADERS, *ADVERSARIES, "pure-pursuit"], scenario).players
-    by_spec = {Path(p.spec).resolve() if p.spec.endswith(".zip") else p.spec: p for role in found for p in found[role]}
-    pursuers = {name: by_spec[latest["pursuer"].resolve()] for name, latest in runs.items()}
-    evaders = {name: by_spec[latest["evader"].resolve()] for name, latest in runs.items()}
-    scripted = {name: next(p for p in found["evader"] if p.spec == name) for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
-    pure = next(p for p in found["pursuer"] if p.spec == "pure-pursuit")
+    found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
+    by_path = {Path(p.spec).resolve(): p for role in found for p in found[role]}
+    pursuers = {name: by_path[latest["pursuer"].resolve()] for name, latest in runs.items()}
+    evaders = {name: by_path[latest["evader"].resolve()] for name, latest in runs.items()}
+    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
+    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
     pairings: list[tuple[Player, Player]] = []
     for name, pursuer in pursuers.items():
         pairings += [(pursuer, e) for e in scripted.values()]

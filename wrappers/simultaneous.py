@@ -16,15 +16,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from pecli.game import Game
 from pecli.game.memory import FrameStack, HistoryWindow
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
-from wrappers.frozen_opponent import ACTION_SPACE, observation_space
+from wrappers.frozen_opponent import ACTION_SPACE, DelegatingVecEnv, observation_space
 
 
 class Side:
@@ -149,11 +148,12 @@ class SimultaneousGame:
                        infos[role]) for role in ROLES}
 
 
-class SideVecEnv(VecEnv):
+class SideVecEnv(DelegatingVecEnv):
     """One side's SB3 ``VecEnv`` over a :class:`SimultaneousGame`."""
 
     def __init__(self, games: SimultaneousGame, role: Role) -> None:
-        self.games, self.role = games, role
+        self.games = self.target = games
+        self.role = role
         self.core = games.sides[role]
         super().__init__(games.n, self.core.observation_space, self.core.action_space)
 
@@ -169,22 +169,3 @@ class SideVecEnv(VecEnv):
     def seed(self, seed: int | None = None) -> list[int | None]:
         self.games.next_seed = seed
         return [seed] * self.num_envs
-
-    def set_curriculum(self, pursuer_fov: float, evader_speed_scale: float) -> None:
-        self.games.set_curriculum(pursuer_fov, evader_speed_scale)
-
-    def close(self) -> None:
-        return None
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self.games, attr_name)] * len(self._get_indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self.games, attr_name, value)
-
-    def env_method(self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any) -> list[Any]:
-        result = getattr(self.games, method_name)(*args, **kwargs)
-        return [result] * len(self._get_indices(indices))
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False] * len(self._get_indices(indices))

@@ -313,14 +313,13 @@ class SelfPlay:
         sp, t = self.settings, self.scenario.training
         learners = self.learners
         progress = {role: learners[role].progress(r) for role in ROLES}
-        fresh = all(p is None for p in progress.values())
         for role in ROLES:
             if progress[role] is None:
                 progress[role] = {"round": r, "start_steps": int(learners[role].model.num_timesteps), "cpu_seconds": 0.0,
                                   "episodes": 0, "captures": 0}
         seed = turn_seed(self.state.seed, r, "pursuer")
-        if not fresh:  # resumed inside the round: new games from a seed of their own
-            seed = resume_seed(seed, int(learners["pursuer"].model.num_timesteps))
+        if any(learners[role].model.num_timesteps > progress[role]["start_steps"] for role in ROLES):
+            seed = resume_seed(seed, int(learners["pursuer"].model.num_timesteps))  # resumed inside: games of their own
         stats = {role: EpisodeStats(episodes=progress[role]["episodes"], captures=progress[role]["captures"])
                  for role in ROLES}
         for role in ROLES:
@@ -337,9 +336,9 @@ class SelfPlay:
             """Commit both learners' durable states with the round's progress so far."""
             nonlocal cpu
             now = time.process_time()
+            share = (now - cpu) / len(ROLES)  # the round's CPU, half to each learner
             sources = {}
             for role in ROLES:
-                share = (now - cpu) / len(ROLES)
                 progress[role].update(cpu_seconds=progress[role]["cpu_seconds"] + share,
                                       episodes=stats[role].episodes, captures=stats[role].captures)
                 episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role) + stats[role].episodes

@@ -376,8 +376,13 @@ def load_scenario(path_or_name: str | Path) -> Scenario:
     if not path.is_file():
         known = ", ".join(builtin_names())
         raise ConfigError(f"config not found: {path_or_name} (give a YAML file or one of: {known})")
+    return scenario_from_dict(read_yaml(path), source=str(path))
+
+
+def read_yaml(path: Path) -> Any:
+    """A YAML file read safely; :class:`ConfigError` in one line (with the line number) if it cannot be."""
     try:
-        data = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""
@@ -385,4 +390,3 @@ def load_scenario(path_or_name: str | Path) -> Scenario:
         raise ConfigError(f"{path}:{where}: {problem}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
-    return scenario_from_dict(data, source=str(path))

@@ -16,9 +16,10 @@ import yaml
 from typer.testing import CliRunner
 
 from pecli.cli import app
-from pecli.errors import ConfigError
+from pecli.errors import ConfigError, PecliError
 from pecli.experiment import ExperimentRunner, builtin_experiments, load_experiment
 from pecli.experiment.runs import SELFPLAY_STATE, run_progress
+from pecli.experiment.spec import experiment_from_dict
 
 runner = CliRunner()
 
@@ -141,6 +142,9 @@ def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
     assert len(json.loads((out / "experiment.json").read_text())["sessions"]) == 2
     result = runner.invoke(app, ["experiment", "status", str(out)])
     assert result.exit_code == 0 and "2/2 runs done" in result.output
+    other = experiment_from_dict({**SMOKE, "name": "smoke"}, "other")
+    with pytest.raises(PecliError, match="holds experiment 'smoke' with other settings"):
+        ExperimentRunner(other, out).prepare()
     time.sleep(1)
     assert not ray_processes()  # embedded Ray left nothing behind
 

@@ -103,6 +103,7 @@ def run(
     previous = signal.getsignal(signal.SIGTERM)
     runner = ExperimentRunner(loaded, out, on_update=update)
     again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
+    runner.prepare()  # refuses another experiment's --out, or one another driver runs, before Ray starts
     try:
         if live is not None:
             live.start()

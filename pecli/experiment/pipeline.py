@@ -155,10 +155,12 @@ class ExperimentRunner:
         self.session = Session()
         self.rows = [RunStatus(run, run_progress(run, self.zoo)) for run in experiment.runs()]
         self.stage = "starting"
+        self.prepared = False
 
     # -- the record in out/ ------------------------------------------------------------------------
-    def _prepare(self) -> None:
-        """Record the experiment in ``out``, or check that ``out`` holds this same experiment."""
+    def prepare(self) -> None:
+        """Record the experiment in ``out``, or check that ``out`` holds this same experiment and that no
+        other driver runs it (:meth:`run` does it first if it was not done)."""
         spec = self.experiment.spec
         state = read_state(self.out)
         if state:
@@ -172,6 +174,7 @@ class ExperimentRunner:
         atomic_write_text(self.out / SPEC_FILE, yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
         self.sessions = state.get("sessions", [])
         self.stages: dict[str, Any] = state.get("stages", {})
+        self.prepared = True
         self._save()
 
     def _save(self, ended: str | None = None) -> None:
@@ -196,7 +199,8 @@ class ExperimentRunner:
     # -- the stages ----------------------------------------------------------------------------------
     def run(self, cluster: RayCluster) -> Path:
         """Run every stage not done yet; returns the report's Markdown file."""
-        self._prepare()
+        if not self.prepared:
+            self.prepare()
         try:
             self._train(cluster)
             self._tournament(cluster, self._rank(cluster))
@@ -314,12 +318,36 @@ class ExperimentRunner:
 
         settings = self.experiment.spec.tournament
         paths = [path for roles in kept.values() for role in ROLES for path in roles.get(role, [])]
-        found = find_players([*paths, *settings.players], self.experiment.scenario, baselines=settings.baselines)
+        extra = [self._solved(spec) for spec in settings.players]
+        found = find_players([*paths, *extra], self.experiment.scenario, baselines=settings.baselines)
         pairings = schedule(found.players)
         self._update("tournament")
         results = self._play(cluster, "tournament", found.players, pairings, settings.episodes, settings.seeds)
         write_reports(results, self.out / "tournament")
         return results
+
+    def _solved(self, spec: str) -> str:
+        """A player string, with an HJ player that would read this machine's solution cache (``hj``,
+        ``hj:model=rel6d``) given a solution file in ``out/hj/`` instead, solved there first if needed (a
+        few seconds), so that every node of a cluster reads the same file."""
+        from pecli.hj.cache import solve_cached
+        from pecli.hj.problem import Problem
+        from pecli.policies.hj import parse_options
+
+        family, _, options = spec.partition(":")
+        if family != "hj":
+            return spec
+        settings = parse_options(options)
+        if "solution" in settings:
+            return spec
+        model = settings.pop("model", "rel4d")
+        scenario = self.experiment.scenario
+        self._update(f"solving the HJ game ({model})")
+        _, path, _ = solve_cached(Problem.for_scenario(scenario, model), scenario.name,  # type: ignore[arg-type]
+                                  out=self.out / "hj" / f"hj-{model}.npz")
+        if not settings:
+            return str(path.resolve())  # a solution file plays as itself, named after it
+        return "hj:" + ",".join([str(path.resolve()), *(f"{key}={value}" for key, value in settings.items())])
 
     def _report(self) -> Path:
         from pecli.experiment.report import write_report

@@ -10,7 +10,7 @@ the paper's bold. A cell played over fewer episodes than the paper's 1500 says s
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -170,8 +170,6 @@ class ExperimentReport:
 
     def markdown(self) -> str:
         spec, grid = self.experiment.spec, self.experiment.spec.runs
-        cells = {(c.pursuer, c.evader): c for c in self.cells}
-        pursuers, evaders = self.groups["pursuer"], self.groups["evader"]
         budget = (f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
                   f"{grid.steps_per_round or self.experiment.scenario.training.selfplay.steps_per_round:,} "
                   "transitions per side" if "selfplay" in grid.schedules else f"{grid.steps or '-'} transitions")
@@ -190,40 +188,12 @@ class ExperimentReport:
             "Bold: the best pursuer against that evader, or tied with it (two-proportion z-test, p > 0.05). "
             f"†: fewer episodes than the paper's {PAPER_EPISODES} (the count is in the next table).",
             "",
-            "| evader \\ pursuer | " + " | ".join(pursuers) + " |",
-            "| --- |" + " --- |" * len(pursuers),
         ]
-        for evader in evaders:
-            row = []
-            for pursuer in pursuers:
-                cell = cells.get((pursuer, evader))
-                if cell is None:
-                    row.append("-")
-                    continue
-                ours = f"{cell.capture_rate:.2f}"
-                ours = f"**{ours}**" if cell.best_in_row else ours
-                ours += "†" if cell.episodes < PAPER_EPISODES else ""
-                if cell.paper_capture_rate is not None:
-                    diff = cell.capture_rate - cell.paper_capture_rate
-                    ours += f" / {cell.paper_capture_rate:.2f} ({diff:+.2f})".replace("-", "−")
-                row.append(ours)
-            lines.append(f"| {evader} | " + " | ".join(row) + " |")
+        lines += self._grid(self._rate_text)
         lines += ["", "## Normalised time to capture (σ) and episodes per cell", ""]
         if self.table == "II":
             lines += ["The paper's time (σ) in brackets.", ""]
-        lines += ["| evader \\ pursuer | " + " | ".join(pursuers) + " |", "| --- |" + " --- |" * len(pursuers)]
-        for evader in evaders:
-            row = []
-            for pursuer in pursuers:
-                cell = cells.get((pursuer, evader))
-                if cell is None:
-                    row.append("-")
-                    continue
-                text = f"{cell.time_mean:.2f} (σ={cell.time_std:.2f}), n={cell.episodes}"
-                if cell.paper_time is not None:
-                    text += f" [{cell.paper_time:.2f} (σ={cell.paper_time_std:.2f})]"
-                row.append(text)
-            lines.append(f"| {evader} | " + " | ".join(row) + " |")
+        lines += self._grid(self._time_text)
         lines += ["", "## Bradley–Terry ratings (Elo scale; pursuers and evaders on one scale)", "",
                   "Groups (all their pairings pooled):", "", "| # | group | role | rating | ± se |",
                   "| ---: | --- | --- | ---: | ---: |"]
@@ -236,6 +206,35 @@ class ExperimentReport:
                          f"{r['stderr']:.0f} |")
         lines += ["", "![capture rate per cell](table.png)", ""]
         return "\n".join(lines)
+
+    def _grid(self, text: Callable[[Cell], str]) -> list[str]:
+        """A Markdown table: evader groups as rows, pursuer groups as columns, ``text(cell)`` in each cell."""
+        cells = {(c.pursuer, c.evader): c for c in self.cells}
+        pursuers = self.groups["pursuer"]
+        lines = ["| evader \\ pursuer | " + " | ".join(pursuers) + " |", "| --- |" + " --- |" * len(pursuers)]
+        for evader in self.groups["evader"]:
+            row = [text(cells[(p, evader)]) if (p, evader) in cells else "-" for p in pursuers]
+            lines.append(f"| {evader} | " + " | ".join(row) + " |")
+        return lines
+
+    @staticmethod
+    def _rate_text(cell: Cell) -> str:
+        """``**0.91**† / 0.98 (−0.07)``: ours (bold: best or tied; †: fewer episodes than the paper's), the
+        paper's, the difference."""
+        text = f"{cell.capture_rate:.2f}"
+        text = f"**{text}**" if cell.best_in_row else text
+        text += "†" if cell.episodes < PAPER_EPISODES else ""
+        if cell.paper_capture_rate is not None:
+            diff = cell.capture_rate - cell.paper_capture_rate
+            text += f" / {cell.paper_capture_rate:.2f} ({diff:+.2f})".replace("-", "−")
+        return text
+
+    @staticmethod
+    def _time_text(cell: Cell) -> str:
+        text = f"{cell.time_mean:.2f} (σ={cell.time_std:.2f}), n={cell.episodes}"
+        if cell.paper_time is not None:
+            text += f" [{cell.paper_time:.2f} (σ={cell.paper_time_std:.2f})]"
+        return text
 
     def to_json(self) -> dict[str, Any]:
         return {

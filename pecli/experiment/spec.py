@@ -25,13 +25,12 @@ import json
 from pathlib import Path
 from typing import Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
 from pecli.roles import Role
-from pecli.scenario import Scenario, builtin_config_dir, load_scenario, validation_message
+from pecli.scenario import Scenario, builtin_config_dir, load_scenario, read_yaml, validation_message
 
 BeliefKind = Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"]
 Schedule = Literal["selfplay", "pursuer", "evader"]
@@ -213,12 +212,4 @@ def load_experiment(name_or_path: str | Path) -> LoadedExperiment:
     if not path.is_file():
         known = ", ".join(builtin_experiments())
         raise ConfigError(f"experiment not found: {name_or_path} (give a YAML file or one of: {known})")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}:{where}: {getattr(exc, 'problem', None) or 'not valid YAML'}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
-    return experiment_from_dict(data, str(path), base=path.parent)
+    return experiment_from_dict(read_yaml(path), str(path), base=path.parent)

@@ -76,9 +76,10 @@ def run(
 ) -> None:
     """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
 
-    The report (Markdown, JSON, PNG) and everything else go to [bold]--out[/]. Each run is one Ray task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted
-    (Ctrl-C, a killed driver, a lost worker), it continues with the same command: finished runs and
-    played pairings are kept, unfinished runs continue from their last checkpoint.
+    The report (Markdown, JSON, PNG) and everything else go to [bold]--out[/]. Each run is one Ray
+    task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted (Ctrl-C, a killed
+    driver, a lost worker), it continues with the same command: finished runs and played pairings are
+    kept, unfinished runs continue from their last checkpoint.
     """
     from pecli.experiment import ExperimentRunner, RayCluster, load_experiment
 

@@ -124,7 +124,7 @@ def statuses(experiment: LoadedExperiment, out: Path) -> list[RunStatus]:
             status = "done"
         elif status in ("running", "queued") and not alive:
             status = "stopped"
-        elif status == "queued" and marker.get("started", 0) >= state["driver"].get("started", float("inf")):
+        elif status == "queued" and marker.get("started", 0) >= (state.get("driver") or {}).get("started", float("inf")):
             status = "running"
         row = RunStatus(run, progress, status, record.get("error", ""), host=marker.get("host", ""))
         rows.append(row)

@@ -109,6 +109,23 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
     return path
 
 
+# ---------------------------------------------------------------------- Table I
+PAPER_TABLE_I: dict[tuple[str, str], float] = {
+    # (pursuer, evader): capture rate, paper Table I (SPEC section 4)
+    (pursuer, evader): rate
+    for evader, rates in {
+        "Random Walk": (0.67, 0.92, 0.98, 0.94, 0.98, 0.98),
+        "Greedy": (0.34, 0.83, 0.94, 0.93, 0.98, 0.99),
+        "Rash": (0.39, 0.82, 0.83, 0.82, 0.94, 0.99),
+        "MADDPG": (0.27, 0.69, 0.79, 0.84, 0.96, 0.98),
+        "UKF": (0.09, 0.84, 0.70, 0.75, 0.89, 0.97),
+        "Image": (0.09, 0.68, 0.82, 0.75, 0.95, 0.97),
+        "Ours": (0.15, 0.83, 0.70, 0.73, 0.89, 0.99),
+        "Ours-Mixed": (0.17, 0.69, 0.86, 0.74, 0.99, 0.99),
+    }.items()
+    for pursuer, rate in zip(("Pure Pursuit", "MADDPG", "UKF", "Image", "Ours", "Ours-Mixed"), rates)
+}
+
 # ---------------------------------------------------------------------- Table II
 PAPER_TABLE_II: dict[tuple[str, str], tuple[float, float, float]] = {
     # (pursuer, evader): (time-to-capture, its σ, capture rate), paper Table II

@@ -491,13 +491,18 @@ def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
-        errors = exc.errors()
-        first = errors[0]
-        where = _location(first)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-        raise ConfigError(f"{source}: {where or 'top level'}: {_describe(first)}{more}") from None
+        raise ConfigError(validation_message(exc, source)) from None
     check_resources(scenario, source)
     return scenario
+
+
+def validation_message(exc: ValidationError, source: str) -> str:
+    """One line for a pydantic error: ``<source>: <key.path>: <problem> (and N more problems)``."""
+    errors = exc.errors()
+    first = errors[0]
+    where = _location(first)
+    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    return f"{source}: {where or 'top level'}: {_describe(first)}{more}"
 
 
 class StrictLoader(yaml.SafeLoader):
@@ -521,14 +526,15 @@ class StrictLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-MAX_FILE_BYTES = 1 << 20  # a scenario file is a page of YAML
+MAX_FILE_BYTES = 1 << 20  # a scenario or experiment file is a page of YAML
 
 
 def read_yaml(path: Path) -> Any:
-    """The content of the YAML file ``path`` (safe, duplicate keys refused); :class:`ConfigError` if unreadable."""
+    """The content of the YAML file ``path`` (safe, duplicate keys refused); :class:`ConfigError` in one
+    line (with the line number) if it cannot be read."""
     try:
         if path.stat().st_size > MAX_FILE_BYTES:
-            raise ConfigError(f"{path}: {path.stat().st_size:,} bytes is too large for a scenario file "
+            raise ConfigError(f"{path}: {path.stat().st_size:,} bytes is too large for a configuration file "
                               f"(at most {MAX_FILE_BYTES:,})")
         return yaml.load(path.read_text(), Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
@@ -537,7 +543,7 @@ def read_yaml(path: Path) -> Any:
         problem = " ".join(str(getattr(exc, "problem", None) or "not valid YAML").split())
         raise ConfigError(f"{path}:{where}: {problem}") from None
     except RecursionError:
-        raise ConfigError(f"{path}: nested too deeply to be a scenario") from None
+        raise ConfigError(f"{path}: nested too deeply to be read") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
 

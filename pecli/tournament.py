@@ -21,6 +21,7 @@ import signal
 import sys
 import threading
 import time
+import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -340,8 +341,39 @@ def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     pool.shutdown(wait=True)
 
 
-def _play_job(job: tuple[Scenario, Player, Player, int, list[int]]) -> PairingResult:
+PairingJob = tuple[Scenario, Player, Player, int, list[int]]
+"""The arguments of :func:`play_pairing`: scenario, pursuer, evader, episodes per seed, seeds."""
+
+PairingExecutor = Callable[[Sequence[PairingJob]], Iterable[tuple[int, PairingResult | PecliError]]]
+"""Plays pairing jobs anywhere and yields ``(index of the job, its result or its PecliError)`` as each ends,
+in any order. :func:`local_executor` plays them on this machine; ``pecli experiment`` passes one that plays
+them as Ray tasks."""
+
+
+def _play_job(job: PairingJob) -> PairingResult:
     return play_pairing(*job)
+
+
+def local_executor(workers: int = 1) -> PairingExecutor:
+    """Pairings played in this process (``workers`` 1) or in a pool of ``workers`` spawned processes."""
+
+    def execute(jobs: Sequence[PairingJob]) -> Iterator[tuple[int, PairingResult | PecliError]]:
+        if workers > 1 and len(jobs) > 1:
+            with worker_pool(workers) as pool:
+                futures = {pool.submit(_play_job, job): index for index, job in enumerate(jobs)}
+                for future in as_completed(futures):
+                    try:
+                        yield futures[future], future.result()
+                    except PecliError as exc:  # keep playing the others; each finished pairing is cached
+                        yield futures[future], exc
+        else:
+            for index, job in enumerate(jobs):
+                try:
+                    yield index, _play_job(job)
+                except PecliError as exc:
+                    yield index, exc
+
+    return execute
 
 
 @dataclass
@@ -409,9 +441,11 @@ def run_tournament(
     out: Path,
     workers: int = 1,
     on_result: Callable[[PairingResult, bool], None] | None = None,
+    executor: PairingExecutor | None = None,
 ) -> TournamentResults:
     """Play every pairing not yet cached in ``out/pairings``; ``on_result(result, was_cached)`` reports each.
 
+    ``executor`` plays the pairings not cached (default: :func:`local_executor` with ``workers``).
     ``out`` is locked while the tournament runs: :class:`~pecli.locks.FolderLocked` if another process
     is writing it.
     """
@@ -419,7 +453,7 @@ def run_tournament(
     cache.mkdir(parents=True, exist_ok=True)
     with locked(out, "tournament output"):
         results: dict[str, PairingResult] = {}
-        todo: list[tuple[str, tuple]] = []
+        todo: list[tuple[str, PairingJob]] = []
         for pursuer, evader in pairings:
             key = pairing_key(scenario, pursuer, evader, episodes, seeds)
             result = _cached(cache / f"{key}.json", pursuer, evader)
@@ -437,20 +471,12 @@ def run_tournament(
                 on_result(result, False)
 
         failures: list[str] = []
-        if workers > 1 and len(todo) > 1:
-            with worker_pool(workers) as pool:
-                futures = {pool.submit(_play_job, job): key for key, job in todo}
-                for future in as_completed(futures):
-                    try:
-                        finish(futures[future], future.result())
-                    except PecliError as exc:  # keep playing the others; each finished pairing is cached
-                        failures.append(str(exc))
-        else:
-            for key, job in todo:
-                try:
-                    finish(key, _play_job(job))
-                except PecliError as exc:
-                    failures.append(str(exc))
+        play = executor if executor is not None else local_executor(workers)
+        for index, outcome in play([job for _, job in todo]):
+            if isinstance(outcome, PecliError):
+                failures.append(str(outcome))
+            else:
+                finish(todo[index][0], outcome)
         if failures:
             more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
             raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")

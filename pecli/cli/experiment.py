@@ -1,0 +1,174 @@
+"""``pecli experiment run|status|report``: a whole reproduction (train, rank, tournament, report) from one
+experiment file, executed on Ray."""
+
+from __future__ import annotations
+
+import signal
+import socket
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.live import Live
+from rich.table import Table
+
+from pecli.cli.common import console, err_console, user_errors
+
+if TYPE_CHECKING:
+    from pecli.experiment.pipeline import RunStatus
+
+app = typer.Typer(
+    help="Reproduce the paper's tables with one command: a grid of runs, the paper's ranking, the final "
+    "tournament and the report, on Ray (embedded on this machine, or a cluster).",
+    no_args_is_help=True,
+)
+
+STATUS_STYLE = {"done": "green", "running": "cyan", "failed": "red", "stopped": "yellow", "queued": "dim",
+                "pending": "dim"}
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.1f} min" if seconds else "-"
+
+
+def runs_table(rows: list[RunStatus], title: str) -> Table:
+    """One row per run: kind, seed, schedule (when the grid has several), round, transitions, CPU time,
+    status, and the host it runs on (when another machine ran any)."""
+    schedules = len({row.run.schedule for row in rows}) > 1
+    hosts = any(row.host not in ("", socket.gethostname()) for row in rows)
+    table = Table(title=title, title_justify="left")
+    table.add_column("run", no_wrap=True)
+    table.add_column("kind", no_wrap=True)
+    table.add_column("seed", justify="right")
+    if schedules:
+        table.add_column("schedule", no_wrap=True)
+    for column in ("round", "steps", "CPU time"):
+        table.add_column(column, justify="right", no_wrap=True)
+    table.add_column("status", overflow="fold", min_width=7)
+    if hosts:
+        table.add_column("host", no_wrap=True)
+    for row in rows:
+        p = row.progress
+        where = f"{p.round}/{p.rounds}" + (f" {p.role}" if p.role and row.status == "running" else "") if p.rounds else "-"
+        status = f"[{STATUS_STYLE.get(row.status, '')}]{row.status}[/]"
+        if row.error:
+            status += f": {row.error}"
+        cells = [row.run.name, row.run.kind, str(row.run.seed), *([row.run.schedule] if schedules else []), where,
+                 f"{p.steps:,}", _minutes(p.cpu_seconds), status, *([row.host] if hosts else [])]
+        table.add_row(*cells)
+    return table
+
+
+@app.command()
+@user_errors
+def run(
+    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, smoke) or a "
+                                              "YAML file.", show_default=False)],
+    address: Annotated[
+        str | None,
+        typer.Option("--address", help="Join a running Ray cluster: auto, HOST:PORT or ray://HOST:PORT "
+                     "(default: start Ray on this machine). Every node must see --out at the same path."),
+    ] = None,
+    cpus: Annotated[int | None, typer.Option("--cpus", help="Workers of the embedded Ray (default: all cores).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="The experiment's folder (default: "
+                                             "runs/experiments/<name>); run again on it to continue.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live table.")] = False,
+) -> None:
+    """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
+
+    The report (Markdown, JSON, PNG) and everything else go to [bold]--out[/]. Each run is one Ray
+    task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted (Ctrl-C, a killed
+    driver, a lost worker), it continues with the same command: finished runs and played pairings are
+    kept, unfinished runs continue from their last checkpoint.
+    """
+    from pecli.experiment import ExperimentRunner, RayCluster, load_experiment
+
+    loaded = load_experiment(experiment)
+    out = out or Path("runs/experiments") / loaded.name
+    live = Live(console=err_console, refresh_per_second=2, transient=False,
+                auto_refresh=True) if not quiet and err_console.is_terminal else None
+    title = f"experiment {loaded.name} in {out}"
+    last_stage = ""
+
+    def update(rows: list[RunStatus], stage: str) -> None:
+        nonlocal last_stage
+        if live is not None:
+            live.update(runs_table(rows, f"{title}: {stage}"))
+        elif stage.split(" ")[0] != last_stage:
+            err_console.print(f"{loaded.name}: {stage.split(' ')[0]}", highlight=False)
+        last_stage = stage.split(" ")[0]
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
+
+    previous = signal.getsignal(signal.SIGTERM)
+    runner = ExperimentRunner(loaded, out, on_update=update)
+    again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
+    runner.prepare()  # refuses another experiment's --out, or one another driver runs, before Ray starts
+    try:
+        if live is not None:
+            live.start()
+        with RayCluster(address=address, cpus=cpus) as cluster:
+            signal.signal(signal.SIGTERM, interrupt)  # after ray.init, which installs a handler of its own
+            where = (f"embedded Ray, {cluster.total_cpus()} CPUs" if cluster.embedded else
+                     f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs")
+            err_console.print(f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; "
+                              f"output in {out}", highlight=False)
+            report = runner.run(cluster)
+    except KeyboardInterrupt:
+        if live is not None:
+            live.stop()
+        err_console.print(f"[yellow]interrupted[/]: finished runs and pairings are saved, unfinished runs continue "
+                          f"from their last checkpoint: {again}", highlight=False)
+        raise typer.Exit(code=130) from None
+    finally:
+        if live is not None:
+            live.stop()
+        signal.signal(signal.SIGTERM, previous)
+    session = runner.session
+    err_console.print(f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
+                      f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",
+                      highlight=False)
+    _print_report(out)
+    err_console.print(f"wrote {report}, {out / 'report.json'}, {out / 'table.png'}", highlight=False)
+
+
+@app.command()
+@user_errors
+def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
+    """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
+    from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, statuses
+
+    loaded = open_experiment(out)
+    state = read_state(out)
+    rows = statuses(loaded, out)
+    alive = driver_alive(state)
+    console.print(runs_table(rows, f"experiment {loaded.name} in {out}" + (" (running)" if alive else "")))
+    stages = state.get("stages", {})
+    for name in ("ranking", "tournament"):
+        stage = stages.get(name)
+        if isinstance(stage, dict):
+            console.print(f"{name}: {stage.get('status')}, {stage.get('pairings')} pairings", highlight=False)
+    if stages.get("report") == "done":
+        console.print(f"report: {out / 'report.md'}", highlight=False)
+    done = sum(row.status == "done" for row in rows)
+    cpu = sum(row.progress.cpu_seconds for row in rows)
+    console.print(f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training", highlight=False)
+
+
+@app.command()
+@user_errors
+def report(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
+    """Write the experiment's report again (report.md, report.json, table.png) and print its table."""
+    from pecli.experiment.report import write_report
+
+    paths = write_report(out)
+    _print_report(out)
+    err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
+
+
+def _print_report(out: Path) -> None:
+    from pecli.experiment.report import ExperimentReport
+    from pecli.reports import results_table
+
+    console.print(results_table(ExperimentReport(out).grouped_results()))

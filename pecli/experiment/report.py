@@ -1,0 +1,257 @@
+"""The experiment's report: the final tournament grouped by belief kind and laid out as the paper's
+Table I (or Table II), our numbers beside the paper's, as Markdown, JSON and a PNG heatmap.
+
+A cell pools every pairing of its pursuer group against its evader group (the kept models of every
+seed): capture rate, time-to-capture (σ) and the episodes behind it. Bold marks the best pursuer
+group against each evader group and those that tie with it (two-proportion z-test, p > 0.05), as
+the paper's bold. A cell played over fewer episodes than the paper's 1500 says so.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from pecli.errors import PecliError
+from pecli.experiment.pipeline import KEPT_FILE, open_experiment
+from pecli.experiment.spec import LoadedExperiment
+from pecli.io import atomic_write_json, atomic_write_text
+from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
+from pecli.roles import ROLES, Role
+from pecli.stats import Rating, ties_with_best
+from pecli.tournament import PairingResult, Player, TournamentResults, rate
+
+PAPER_EPISODES = 1500  # per cell: 3 models x 500 episodes (paper section V-B)
+
+KIND_LABELS = {"none": "MADDPG", "ukf": "UKF", "image": "Image", "bimdn": "Ours", "bimdn-mixed": "Ours-Mixed"}
+BASELINE_LABELS = {"pure-pursuit": "Pure Pursuit", "random-walk": "Random Walk", "greedy": "Greedy", "rash": "Rash"}
+TABLE_I_ORDER: dict[Role, list[str]] = {
+    "pursuer": ["Pure Pursuit", "MADDPG", "UKF", "Image", "Ours", "Ours-Mixed"],
+    "evader": ["Random Walk", "Greedy", "Rash", "MADDPG", "UKF", "Image", "Ours", "Ours-Mixed"],
+}
+OPTIMAL = "optimal control"
+
+
+@dataclass
+class Cell:
+    """One pursuer group against one evader group, pooled over their pairings."""
+
+    pursuer: str
+    evader: str
+    episodes: int
+    captures: int
+    time_mean: float
+    time_std: float
+    best_in_row: bool = False
+    paper_capture_rate: float | None = None
+    paper_time: float | None = None
+    paper_time_std: float | None = None
+
+    @property
+    def capture_rate(self) -> float:
+        return self.captures / self.episodes
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["capture_rate"] = round(self.capture_rate, 4)
+        data["difference"] = (None if self.paper_capture_rate is None
+                              else round(self.capture_rate - self.paper_capture_rate, 4))
+        data["fewer_episodes_than_paper"] = self.episodes < PAPER_EPISODES
+        return data
+
+
+def pool(pursuer: str, evader: str, results: Iterable[dict[str, Any]]) -> Cell:
+    """Pool pairings: episodes and captures add up; the time's mean and σ are those of all episodes together."""
+    rows = list(results)
+    n = sum(r["episodes"] for r in rows)
+    mean = sum(r["episodes"] * r["time_to_capture_mean"] for r in rows) / n
+    second = sum(r["episodes"] * (r["time_to_capture_std"] ** 2 + r["time_to_capture_mean"] ** 2) for r in rows) / n
+    return Cell(pursuer, evader, n, sum(r["captures"] for r in rows), mean, max(second - mean**2, 0.0) ** 0.5)
+
+
+class ExperimentReport:
+    """The final tournament of the experiment in ``out``, grouped for the paper's table."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.experiment: LoadedExperiment = open_experiment(out)
+        self.table = self.experiment.spec.report.table
+        try:
+            self.data = json.loads((out / "tournament" / "results.json").read_text())
+            kept = json.loads((out / KEPT_FILE).read_text())
+        except FileNotFoundError:
+            raise PecliError(f"{out}: the experiment has not reached its tournament yet "
+                             "(`pecli experiment status` says how far it got)") from None
+        except (OSError, ValueError) as exc:
+            raise PecliError(f"{out}: damaged results ({type(exc).__name__}: {exc})") from None
+        runs = {run.name: run for run in self.experiment.runs()}
+        self.group_of_spec: dict[str, str] = {}
+        learned: list[str] = []
+        for name, roles in kept.items():
+            run = runs.get(name)
+            if run is None:
+                continue
+            label = KIND_LABELS[run.kind] if run.schedule == "selfplay" else f"{KIND_LABELS[run.kind]} ({run.schedule})"
+            learned.append(label)
+            for paths in roles.values():
+                for path in paths:
+                    self.group_of_spec[path] = label
+        self.ours_single = self.table == "II" and len(set(learned)) == 1
+        self.groups: dict[Role, list[str]] = {role: [] for role in ROLES}
+        self.player_group: dict[str, str] = {}
+        for rating in self.data["ratings"]:
+            group = self._group(rating["spec"], rating["name"])
+            self.player_group[rating["name"]] = group
+            if group not in self.groups[rating["role"]]:
+                self.groups[rating["role"]].append(group)
+        for role in ROLES:
+            order = self._order(role)
+            self.groups[role].sort(key=lambda g: (order.index(g) if g in order else len(order), g))
+        self.cells = self._cells()
+
+    def _group(self, spec: str, name: str) -> str:
+        if spec in self.group_of_spec:
+            label = self.group_of_spec[spec]
+            return "ours" if self.ours_single else label
+        if is_hj_spec(spec):
+            return OPTIMAL
+        if spec in BASELINE_LABELS:
+            return BASELINE_LABELS[spec]
+        return name
+
+    def _order(self, role: Role) -> list[str]:
+        if self.table == "II":
+            return [OPTIMAL, "ours"]
+        return TABLE_I_ORDER[role]
+
+    def _cells(self) -> list[Cell]:
+        grouped: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        for r in self.data["pairings"]:
+            key = (self.player_group[r["pursuer"]], self.player_group[r["evader"]])
+            grouped.setdefault(key, []).append(r)
+        cells = {key: pool(*key, rows) for key, rows in grouped.items()}
+        for evader in self.groups["evader"]:
+            row = [cells[(p, evader)] for p in self.groups["pursuer"] if (p, evader) in cells]
+            for cell, tie in zip(row, ties_with_best([c.captures for c in row], [c.episodes for c in row])):
+                cell.best_in_row = bool(tie)
+        for (p, e), cell in cells.items():
+            if self.table == "I":
+                cell.paper_capture_rate = PAPER_TABLE_I.get((p, e))
+            elif self.table == "II" and (p, e) in PAPER_TABLE_II:
+                cell.paper_time, cell.paper_time_std, cell.paper_capture_rate = PAPER_TABLE_II[(p, e)]
+        return [cells[(p, e)] for e in self.groups["evader"] for p in self.groups["pursuer"] if (p, e) in cells]
+
+    # -- outputs ----------------------------------------------------------------------------------
+    def grouped_results(self) -> TournamentResults:
+        """The cells as a tournament of groups (for the heatmap and the rich table); its ratings are
+        :meth:`group_ratings`'."""
+        players = {role: [Player(g, g, role, f"group:{g}") for g in self.groups[role]] for role in ROLES}
+        pairings = [PairingResult(c.pursuer, c.evader, c.episodes, c.captures, c.time_mean, c.time_std)
+                    for c in self.cells]
+        return TournamentResults(scenario=self.experiment.scenario, players=players, pairings=pairings,
+                                 ratings=[r for _, _, r in self.group_ratings()],
+                                 episodes=self.data["episodes_per_seed"], seeds=self.data["seeds"])
+
+    def group_ratings(self) -> list[tuple[str, Role, Rating]]:
+        """Bradley–Terry ratings of the groups from the pooled cells: ``[(group, role, rating)]``, best first
+        (a group name such as "MADDPG" plays both roles, so it is rated once per role)."""
+        def key(group: str, role: Role) -> str:
+            return f"{group} ({role})"
+
+        players = {role: [Player(key(g, role), g, role, f"group:{role}:{g}") for g in self.groups[role]]
+                   for role in ROLES}
+        pairings = [PairingResult(key(c.pursuer, "pursuer"), key(c.evader, "evader"), c.episodes, c.captures,
+                                  c.time_mean, c.time_std) for c in self.cells]
+        by_key = {p.name: (p.spec, p.role) for role in ROLES for p in players[role]}
+        return [(*by_key[r.name], r) for r in rate(players, pairings)]
+
+    def markdown(self) -> str:
+        spec, grid = self.experiment.spec, self.experiment.spec.runs
+        budget = (f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
+                  f"{grid.steps_per_round or self.experiment.scenario.training.selfplay.steps_per_round:,} "
+                  "transitions per side" if "selfplay" in grid.schedules else f"{grid.steps or '-'} transitions")
+        title = {"I": "Table I", "II": "Table II"}.get(self.table, "results")
+        lines = [
+            f"# {spec.name}: {title}",
+            "",
+            f"Scenario `{self.experiment.scenario.name}`; runs: {len(grid.kinds)} kinds × {len(grid.seeds)} seeds "
+            f"({', '.join(grid.schedules)}), {budget}. Ranking: each checkpoint against {spec.ranking.sample} random "
+            f"checkpoints of the other side, {spec.ranking.episodes} × {spec.ranking.seeds} episodes, best "
+            f"{spec.ranking.keep} per run and role kept. Tournament: {self.data['episodes_per_seed']} episodes × "
+            f"{len(self.data['seeds'])} seeds per pairing.",
+            "",
+            "## Capture rate: ours / the paper's (difference)",
+            "",
+            "Bold: the best pursuer against that evader, or tied with it (two-proportion z-test, p > 0.05). "
+            f"†: fewer episodes than the paper's {PAPER_EPISODES} (the count is in the next table).",
+            "",
+        ]
+        lines += self._grid(self._rate_text)
+        lines += ["", "## Normalised time to capture (σ) and episodes per cell", ""]
+        if self.table == "II":
+            lines += ["The paper's time (σ) in brackets.", ""]
+        lines += self._grid(self._time_text)
+        lines += ["", "## Bradley–Terry ratings (Elo scale; pursuers and evaders on one scale)", "",
+                  "Groups (all their pairings pooled):", "", "| # | group | role | rating | ± se |",
+                  "| ---: | --- | --- | ---: | ---: |"]
+        for rank, (group, role, r) in enumerate(self.group_ratings(), start=1):
+            lines.append(f"| {rank} | {group} | {role} | {r.elo:.0f} | {r.stderr:.0f} |")
+        lines += ["", "Models (each kept checkpoint and heuristic):", "", "| # | player | group | role | rating | ± se |",
+                  "| ---: | --- | --- | --- | ---: | ---: |"]
+        for rank, r in enumerate(self.data["ratings"], start=1):
+            lines.append(f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
+                         f"{r['stderr']:.0f} |")
+        lines += ["", "![capture rate per cell](table.png)", ""]
+        return "\n".join(lines)
+
+    def _grid(self, text: Callable[[Cell], str]) -> list[str]:
+        """A Markdown table: evader groups as rows, pursuer groups as columns, ``text(cell)`` in each cell."""
+        cells = {(c.pursuer, c.evader): c for c in self.cells}
+        pursuers = self.groups["pursuer"]
+        lines = ["| evader \\ pursuer | " + " | ".join(pursuers) + " |", "| --- |" + " --- |" * len(pursuers)]
+        for evader in self.groups["evader"]:
+            row = [text(cells[(p, evader)]) if (p, evader) in cells else "-" for p in pursuers]
+            lines.append(f"| {evader} | " + " | ".join(row) + " |")
+        return lines
+
+    @staticmethod
+    def _rate_text(cell: Cell) -> str:
+        """``**0.91**† / 0.98 (−0.07)``: ours (bold: best or tied; †: fewer episodes than the paper's), the
+        paper's, the difference."""
+        text = f"{cell.capture_rate:.2f}"
+        text = f"**{text}**" if cell.best_in_row else text
+        text += "†" if cell.episodes < PAPER_EPISODES else ""
+        if cell.paper_capture_rate is not None:
+            diff = cell.capture_rate - cell.paper_capture_rate
+            text += f" / {cell.paper_capture_rate:.2f} ({diff:+.2f})".replace("-", "−")
+        return text
+
+    @staticmethod
+    def _time_text(cell: Cell) -> str:
+        text = f"{cell.time_mean:.2f} (σ={cell.time_std:.2f}), n={cell.episodes}"
+        if cell.paper_time is not None:
+            text += f" [{cell.paper_time:.2f} (σ={cell.paper_time_std:.2f})]"
+        return text
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "experiment": self.experiment.spec.name,
+            "table": self.table,
+            "scenario": self.experiment.scenario.name,
+            "paper_episodes_per_cell": PAPER_EPISODES,
+            "groups": self.groups,
+            "cells": [c.to_dict() for c in self.cells],
+            "group_ratings": [{**asdict(r), "name": group, "role": role} for group, role, r in self.group_ratings()],
+            "ratings": [{**r, "group": self.player_group[r["name"]]} for r in self.data["ratings"]],
+        }
+
+
+def write_report(out: Path) -> list[Path]:
+    """Write ``report.md``, ``report.json`` and ``table.png`` into ``out``; returns their paths."""
+    report = ExperimentReport(out)
+    atomic_write_text(out / "report.md", report.markdown())
+    atomic_write_json(out / "report.json", report.to_json())
+    return [out / "report.md", out / "report.json", heatmap(report.grouped_results(), out / "table.png")]

@@ -1,0 +1,101 @@
+"""One run of an experiment: train it (or continue it) with pecli's own entry points, and read its
+progress from its files.
+
+A run is a self-play run (:class:`pecli.rl.selfplay.SelfPlay`) or a one-role run
+(:func:`pecli.rl.train.train`) in the experiment's zoo, ``<out>/zoo/<run>``. Both commit a durable
+state at every checkpoint, so :func:`execute_run` continues whatever a stop left (Ctrl-C, a killed
+driver, a lost worker) and does nothing for a finished run: it is safe to call again, which is what a
+retried task does.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from pecli.experiment.spec import RunSpec
+from pecli.zoo import FINAL, RESUME_DIR
+
+DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
+SELFPLAY_STATE = "selfplay.json"  # pecli.rl.selfplay.STATE_FILE (importing that module loads torch)
+
+
+@dataclass
+class RunProgress:
+    """What a run's files say about it."""
+
+    round: int  # rounds finished (self-play) or 0
+    rounds: int  # rounds planned (self-play) or 0
+    steps: int  # learner transitions, all roles together
+    cpu_seconds: float  # the run's CPU time so far (every process that worked on it)
+    done: bool
+    role: str = ""  # the role training now (self-play), if known
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
+    """The run's progress from its files (cheap: a few small JSON files); all zeros for a run not started."""
+    folder = zoo / run.name
+    records = {role: _read_json(folder / role / RESUME_DIR / DURABLE_RECORD) for role in run.roles}
+    steps = sum(int(r.get("steps", 0)) for r in records.values() if r)
+    cpu = max((float(r.get("cpu_seconds", 0.0)) for r in records.values() if r), default=0.0)
+    if run.schedule != "selfplay":
+        role = run.schedule
+        done = (folder / role / f"{FINAL}.zip").is_file()
+        return RunProgress(0, 0, steps, cpu, done)
+    planned = run.scenario.training.selfplay.rounds
+    state = _read_json(folder / SELFPLAY_STATE) or {}
+    turns = state.get("turns", [])
+    finished = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}  # not exploiters
+    rounds = sum(all((r, role) in finished for role in run.roles) for r in range(1, planned + 1))
+    cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
+    done = rounds == planned
+    role = ""
+    if not done:
+        role = "pursuer" if (rounds + 1, "pursuer") not in finished else "evader"
+    return RunProgress(rounds, planned, steps, cpu, done, role)
+
+
+def execute_run(run: RunSpec, zoo: Path) -> dict[str, Any]:
+    """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
+    or do nothing if it is finished. Returns what it did (``started``, ``resumed`` or ``finished``), with
+    the CPU seconds of this call and the run's progress."""
+    import torch
+
+    from pecli.rl.selfplay import SelfPlay, SelfPlayJob
+    from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, train
+
+    torch.set_num_threads(run.scenario.training.torch_threads)
+    cpu = time.process_time()
+    before = run_progress(run, zoo)
+    folder = zoo / run.name
+    if before.done:
+        return {"did": "finished", "cpu_seconds": 0.0, "progress": before.to_dict()}
+    if run.schedule == "selfplay":
+        resume = (folder / SELFPLAY_STATE).is_file()
+        if folder.exists() and not resume:
+            # stopped between creating the run folder and writing its first state: nothing was trained
+            shutil.rmtree(folder)
+        SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
+                             progress=False)).run()
+    else:
+        resume = (folder / "config.yaml").is_file()
+        opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]
+        train(TrainJob(role=run.schedule, scenario=run.scenario, opponent=opponent, zoo=zoo, name=run.name,
+                       seed=run.seed, resume=resume, progress=False))
+    return {"did": "resumed" if resume else "started", "cpu_seconds": round(time.process_time() - cpu, 2),
+            "progress": run_progress(run, zoo).to_dict()}

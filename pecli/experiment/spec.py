@@ -1,0 +1,215 @@
+"""Experiment files: one YAML file that says what to train, how to rank it, what plays the final
+tournament and which of the paper's tables to report.
+
+    name: table1-small
+    scenario: paper                  # a built-in scenario or a YAML file (relative to this file)
+    training: {checkpoint_every: 50} # overrides of the scenario's training section (as --set)
+    runs:                            # the grid: kinds x seeds x schedules, one run each
+      kinds: [none, ukf, image, bimdn, bimdn-mixed]
+      seeds: [0, 1, 2]
+      schedules: [selfplay]          # selfplay, pursuer or evader
+      rounds: 6                      # self-play budget: rounds of steps_per_round per side
+      steps_per_round: 30000
+    ranking: {sample: 32, episodes: 100, seeds: 1, keep: 1}
+    tournament: {episodes: 500, seeds: 1, baselines: true, players: []}
+    report: {table: I}
+
+:func:`load_experiment` validates it into an :class:`Experiment`: unknown keys, wrong types, unknown
+belief kinds and empty grids are refused in one line naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from pecli.belief import BELIEF_KINDS
+from pecli.errors import ConfigError, PecliError
+from pecli.roles import Role
+from pecli.scenario import Scenario, builtin_config_dir, load_scenario, read_yaml, validation_message
+
+BeliefKind = Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"]
+Schedule = Literal["selfplay", "pursuer", "evader"]
+assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-defined]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RunGrid(_Model):
+    """Every combination of belief kind, seed and schedule is one run."""
+
+    kinds: list[BeliefKind] = Field(min_length=1, description="belief kinds, each trained as its own run")
+    seeds: list[int] = Field(min_length=1, description="training seeds")
+    schedules: list[Schedule] = Field(default=["selfplay"], min_length=1,
+                                      description="selfplay: both sides by alternating self-play; pursuer/evader: one "
+                                      "role against a frozen opponent")
+    opponent: str | None = Field(default=None, description="frozen opponent of pursuer/evader runs (default: greedy, "
+                                 "pure-pursuit)")
+    rounds: int | None = Field(default=None, ge=1, description="self-play rounds (default: the scenario's)")
+    steps_per_round: int | None = Field(default=None, ge=1, description="self-play transitions per side per round")
+    steps: int | None = Field(default=None, ge=1, description="budget of pursuer/evader runs (default: the scenario's)")
+
+    @model_validator(mode="after")
+    def _distinct(self) -> RunGrid:
+        for key in ("kinds", "seeds", "schedules"):
+            values = getattr(self, key)
+            if len(set(values)) != len(values):
+                raise ValueError(f"{key} repeats a value ({values})")
+        if any(seed < 0 for seed in self.seeds):
+            raise ValueError("seeds must not be negative")
+        return self
+
+
+class Ranking(_Model):
+    """The paper's checkpoint ranking: each checkpoint against ``sample`` random checkpoints of the other
+    side; the best ``keep`` of each run and role by mean capture rate go to the tournament."""
+
+    sample: int = Field(default=32, ge=1)
+    episodes: int = Field(default=100, ge=1, description="episodes per seed and pairing")
+    seeds: int = Field(default=1, ge=1)
+    keep: int = Field(default=1, ge=1, description="checkpoints kept per run and role")
+
+
+class TournamentSettings(_Model):
+    """The final tournament: kept pursuers x kept evaders, plus the heuristics and ``players``."""
+
+    episodes: int = Field(default=500, ge=1, description="episodes per seed and pairing")
+    seeds: int = Field(default=1, ge=1)
+    baselines: bool = Field(default=True, description="add the heuristics: pure pursuit; random walk, greedy, rash")
+    players: list[str] = Field(default=[], description="more players, as policy strings (e.g. hj)")
+
+
+class ReportSettings(_Model):
+    table: Literal["I", "II", "none"] = Field(default="I", description="the paper's table to lay the results out as")
+
+
+class Experiment(_Model):
+    """A validated experiment file."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+    description: str = ""
+    scenario: str = Field(min_length=1, description="built-in scenario name or YAML file")
+    training: dict[str, object] = Field(default={}, description="overrides of the scenario's training settings")
+    runs: RunGrid
+    ranking: Ranking = Ranking()
+    tournament: TournamentSettings = TournamentSettings()
+    report: ReportSettings = ReportSettings()
+
+    def fingerprint(self) -> str:
+        """A hash of everything that decides what the experiment computes (not its name or description;
+        settings left at their defaults do not count, so a setting added to pecli later keeps old hashes)."""
+        text = json.dumps(self.model_dump(mode="json", exclude={"name", "description"}, exclude_defaults=True),
+                          sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class RunSpec(BaseModel):
+    """One run of the grid, with its resolved scenario (belief and budget applied)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    name: str
+    kind: str
+    seed: int
+    schedule: Schedule
+    opponent: str | None
+    scenario: Scenario
+
+    @property
+    def roles(self) -> tuple[Role, ...]:
+        return ("pursuer", "evader") if self.schedule == "selfplay" else (self.schedule,)
+
+
+def builtin_experiment_dir() -> Path:
+    """The folder holding the built-in experiments (``configs/experiments``)."""
+    return builtin_config_dir() / "experiments"
+
+
+def builtin_experiments() -> list[str]:
+    return sorted(p.stem for p in builtin_experiment_dir().glob("*.yaml"))
+
+
+def _flatten(data: dict, prefix: str = "") -> dict[str, object]:
+    """``{"selfplay": {"rounds": 2}}`` -> ``{"selfplay.rounds": 2}`` (dotted keys stay as they are)."""
+    flat: dict[str, object] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+class LoadedExperiment:
+    """An :class:`Experiment` with its base scenario and its runs resolved."""
+
+    def __init__(self, spec: Experiment, scenario: Scenario, source: str) -> None:
+        self.spec = spec
+        self.scenario = scenario  # the scenario with the experiment's training overrides
+        self.source = source
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def runs(self) -> list[RunSpec]:
+        """The grid in order: kind, then seed, then schedule."""
+        from pecli.rl.train import with_overrides
+
+        grid, out = self.spec.runs, []
+        for kind in grid.kinds:
+            for seed in grid.seeds:
+                for schedule in grid.schedules:
+                    settings: dict[str, object] = {"belief": kind}
+                    if schedule == "selfplay":
+                        if grid.rounds is not None:
+                            settings["selfplay.rounds"] = grid.rounds
+                        if grid.steps_per_round is not None:
+                            settings["selfplay.steps_per_round"] = grid.steps_per_round
+                    elif grid.steps is not None:
+                        settings["steps"] = grid.steps
+                    name = f"{kind}-s{seed}" if schedule == "selfplay" else f"{kind}-{schedule}-s{seed}"
+                    scenario = with_overrides(self.scenario, settings, source=self.source)
+                    out.append(RunSpec(name=name, kind=kind, seed=seed, schedule=schedule, opponent=grid.opponent,
+                                       scenario=scenario))
+        return out
+
+
+def experiment_from_dict(data: object, source: str, base: Path | None = None) -> LoadedExperiment:
+    """Validate ``data`` (a parsed experiment file); ``base`` is the folder a relative scenario path is read from."""
+    from pecli.rl.train import with_overrides
+
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: an experiment must be a mapping of keys to values, not {type(data).__name__}")
+    try:
+        spec = Experiment.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(validation_message(exc, source)) from None
+    scenario_path = Path(spec.scenario)
+    if base is not None and not scenario_path.is_absolute() and (base / scenario_path).is_file():
+        scenario_path = base / scenario_path
+    try:
+        scenario = load_scenario(scenario_path if scenario_path.suffix in (".yaml", ".yml") else spec.scenario)
+    except PecliError as exc:
+        raise ConfigError(f"{source}: scenario: {exc}") from None
+    if scenario_path.is_file():  # a scenario file: recorded by its absolute path, read from wherever --out is
+        spec = spec.model_copy(update={"scenario": str(scenario_path.resolve())})
+    scenario = with_overrides(scenario, _flatten(dict(spec.training)), source=source)
+    return LoadedExperiment(spec, scenario, source)
+
+
+def load_experiment(name_or_path: str | Path) -> LoadedExperiment:
+    """Read and validate an experiment from a YAML file or a built-in name (:func:`builtin_experiments`)."""
+    path = Path(name_or_path)
+    if not path.is_file() and path.suffix not in (".yaml", ".yml") and len(path.parts) == 1:
+        path = builtin_experiment_dir() / f"{name_or_path}.yaml"
+    if not path.is_file():
+        known = ", ".join(builtin_experiments())
+        raise ConfigError(f"experiment not found: {name_or_path} (give a YAML file or one of: {known})")
+    return experiment_from_dict(read_yaml(path), str(path), base=path.parent)

@@ -1,0 +1,202 @@
+"""Experiments: validated files, and the smoke experiment on Ray (embedded with 2 CPUs; a driver killed
+mid-run, resumed on a two-node cluster started on this machine) without redoing finished work."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.errors import ConfigError, PecliError
+from pecli.experiment import ExperimentRunner, builtin_experiments, load_experiment
+from pecli.experiment.runs import SELFPLAY_STATE, run_progress
+from pecli.experiment.spec import experiment_from_dict
+
+runner = CliRunner()
+
+SMOKE = {
+    "name": "t", "scenario": "quick",
+    "runs": {"kinds": ["none"], "seeds": [0], "rounds": 1, "steps_per_round": 100},
+}
+
+
+def write(tmp_path: Path, data: dict) -> Path:
+    path = tmp_path / "exp.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_builtin_experiments() -> None:
+    from pecli.rl.selfplay import STATE_FILE
+
+    assert SELFPLAY_STATE == STATE_FILE
+    assert {"smoke", "table1", "table1-small", "table2"} <= set(builtin_experiments())
+    small = load_experiment("table1-small")
+    assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
+    assert len(small.runs()) == 15 and len({run.name for run in small.runs()}) == 15
+    run = small.runs()[0]
+    assert run.scenario.training.belief == run.kind and run.scenario.training.selfplay.rounds == 8
+    assert load_experiment("table2").scenario.name == "point_mass"
+    smoke = load_experiment("smoke")
+    assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"extra": 1}, "extra: unknown key"),
+    ({"runs": {**SMOKE["runs"], "kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
+    ({"runs": {**SMOKE["runs"], "kinds": []}}, "runs.kinds: List should have at least 1 item"),
+    ({"runs": {**SMOKE["runs"], "seeds": "zero"}}, "runs.seeds: Input should be a valid list"),
+    ({"ranking": {"keep": 0}}, "ranking.keep: Input should be greater than or equal to 1"),
+    ({"training": {"batch_size": "big"}}, "training.batch_size: Input should be a valid integer"),
+    ({"training": {"no_such": 1}}, "training.no_such: unknown key"),
+    ({"scenario": "nowhere"}, "scenario: config not found: nowhere"),
+])
+def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, message: str) -> None:
+    path = write(tmp_path, {**SMOKE, **change})
+    with pytest.raises(ConfigError) as info:
+        load_experiment(path)
+    assert str(info.value).startswith(f"{path}: ") and message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
+    from pecli.scenario import builtin_config_dir
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "game.yaml").write_text((builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150",
+                                                                                               "horizon: 120"))
+    loaded = load_experiment(write(folder, {**SMOKE, "scenario": "game.yaml", "training": {"selfplay": {"pfsp_power": 1}}}))
+    run = loaded.runs()[0]
+    assert run.scenario.horizon == 120 and run.scenario.training.selfplay.pfsp_power == 1
+    assert Path(loaded.spec.scenario) == (folder / "game.yaml").resolve()  # so --out can read it from anywhere
+
+
+def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
+    path = write(tmp_path, {**SMOKE, "runs": {**SMOKE["runs"], "kinds": ["none", "none"]}})
+    result = runner.invoke(app, ["experiment", "run", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert result.output.strip().count("\n") == 0 and "exp.yaml: runs: kinds repeats a value" in result.output
+    result = runner.invoke(app, ["experiment", "status", str(tmp_path / "nothing")])
+    assert result.exit_code == 1 and "holds no experiment" in result.output
+
+
+# -- on Ray ---------------------------------------------------------------------------------------------
+
+def ray_processes(group: int | None = None) -> list[str]:
+    """Ray's processes alive in process group ``group`` (default: this one's, where an embedded Ray starts its
+    GCS, raylet and agents; its workers end with the raylet), as ``ps`` lines ``pid ppid pgid args``."""
+    group = os.getpgrp() if group is None else group
+    out = subprocess.run(["ps", "-eo", "pid,ppid,pgid,args"], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines()[1:] if int(line.split()[2]) == group
+            and ("raylet" in line or "gcs_server" in line or "ray::" in line)]
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def cached_pairings(out: Path) -> int:
+    return sum(len(list((out / stage / "pairings").glob("*.json"))) for stage in ("ranking", "tournament")
+               if (out / stage / "pairings").is_dir())
+
+
+def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
+    from pecli.experiment import RayCluster
+
+    experiment = load_experiment("smoke")
+    out = tmp_path / "smoke"
+    assert not ray_processes()
+    with RayCluster(cpus=2) as cluster:
+        assert cluster.total_cpus() == 2
+        first = ExperimentRunner(experiment, out)
+        report = first.run(cluster)
+        again = ExperimentRunner(experiment, out)
+        again.run(cluster)
+    assert (first.session.runs_started, first.session.runs_skipped, first.session.pairings_cached) == (2, 0, 0)
+    played = first.session.pairings_played
+    assert played == cached_pairings(out) > 0
+    assert (again.session.runs_started, again.session.runs_resumed, again.session.runs_skipped) == (0, 0, 2)
+    assert (again.session.pairings_played, again.session.pairings_cached) == (0, played)
+    text = report.read_text()
+    assert "| evader \\ pursuer | Pure Pursuit | MADDPG | Ours |" in text
+    assert "| Greedy | " in text and "| Ours | " in text and "†" in text  # 20 episodes < the paper's 1500
+    data = json.loads((out / "report.json").read_text())
+    cell = next(c for c in data["cells"] if (c["pursuer"], c["evader"]) == ("Ours", "Greedy"))
+    assert cell["paper_capture_rate"] == 0.98 and cell["fewer_episodes_than_paper"]
+    assert abs(cell["difference"] - (cell["capture_rate"] - 0.98)) < 1e-3
+    assert (out / "table.png").stat().st_size > 1000 and (out / "tournament" / "results.json").is_file()
+    assert len(json.loads((out / "experiment.json").read_text())["sessions"]) == 2
+    result = runner.invoke(app, ["experiment", "status", str(out)])
+    assert result.exit_code == 0 and "2/2 runs done" in result.output
+    other = experiment_from_dict({**SMOKE, "name": "smoke"}, "other")
+    with pytest.raises(PecliError, match="holds experiment 'smoke' with other settings"):
+        ExperimentRunner(other, out).prepare()
+    time.sleep(1)
+    assert not ray_processes()  # embedded Ray left nothing behind
+
+
+def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
+    from ray.cluster_utils import Cluster
+
+    from pecli.experiment import RayCluster
+
+    experiment = load_experiment("smoke")
+    out = tmp_path / "smoke"
+    driver = subprocess.Popen([sys.executable, "-m", "pecli", "experiment", "run", "smoke", "--cpus", "2", "--out",
+                               str(out), "-q"], start_new_session=True, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while not any(run_progress(run, out / "zoo").done for run in experiment.runs()):
+            assert driver.poll() is None and time.monotonic() < deadline
+            time.sleep(0.5)
+        driver.send_signal(signal.SIGKILL)  # the driver alone, as the OOM killer would
+        driver.wait()
+        time.sleep(2)
+        assert not [line for line in ray_processes(driver.pid) if "raylet" in line or "gcs_server" in line]
+        workers = [json.loads(marker.read_text())["pid"] for marker in (out / "tasks").glob("*.json")]
+        deadline = time.monotonic() + 10
+        while any(alive(pid) for pid in workers):  # and so did the workers that ran the runs
+            assert time.monotonic() < deadline
+            time.sleep(0.5)
+    finally:
+        try:
+            os.killpg(driver.pid, signal.SIGKILL)  # Ray's agents, which take ~90 s to notice on their own
+        except ProcessLookupError:
+            pass
+    done = {run.name: (out / "zoo" / run.name / SELFPLAY_STATE).read_bytes() for run in experiment.runs()
+            if run_progress(run, out / "zoo").done}
+    cached = cached_pairings(out)
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "object_store_memory": 80 * 1024**2})
+    try:
+        cluster.add_node(num_cpus=1, object_store_memory=80 * 1024**2)
+        cluster.wait_for_nodes()
+        with RayCluster(address=cluster.address) as joined:
+            assert joined.nodes() == 2 and joined.total_cpus() == 2
+            resumed = ExperimentRunner(experiment, out)
+            resumed.run(joined)
+    finally:
+        cluster.shutdown()
+    session = resumed.session
+    assert session.runs_skipped == len(done) >= 1
+    assert session.runs_started + session.runs_resumed == 2 - len(done)
+    assert session.pairings_cached == cached and session.pairings_played == cached_pairings(out) - cached > 0
+    for name, state in done.items():  # finished runs were not touched
+        assert (out / "zoo" / name / SELFPLAY_STATE).read_bytes() == state
+        assert (out / "zoo" / name / "command.txt").read_text().count("\n") == 1
+    assert (out / "report.md").is_file()

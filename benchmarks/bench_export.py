@@ -47,7 +47,7 @@ def build(kind: str, config: str, zoo: Path) -> tuple[Path, Path]:
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=zoo, name=kind)
     env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
     model = make_model(job, env, tensorboard=None)
-    checkpoint = Run.create(zoo, kind, scenario).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
+    checkpoint = Run.create(zoo, kind, scenario, {"command": "bench_export"}).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
     return checkpoint, export_checkpoint(checkpoint, episodes=2).model
 
 

@@ -275,6 +275,20 @@ class Scenario(_Model):
         text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
+    def differences(self, other: Scenario) -> list[tuple[str, Any, Any]]:
+        """What makes ``other`` another game (what :meth:`fingerprint` covers): ``[(key, ours, theirs)]``,
+        e.g. ``[("horizon", 150, 200)]``."""
+
+        def flat(data: Any, prefix: str = "") -> dict[str, Any]:
+            if not isinstance(data, dict):
+                return {prefix.rstrip("."): data}
+            return {k: v for key, value in data.items() for k, v in flat(value, f"{prefix}{key}.").items()}
+
+        exclude = {"name", "description", "training"}
+        ours, theirs = (flat(s.model_dump(exclude=exclude, mode="json")) for s in (self, other))
+        return [(key, ours.get(key), theirs.get(key)) for key in sorted(ours.keys() | theirs.keys())
+                if ours.get(key) != theirs.get(key)]
+
 
 def builtin_config_dir() -> Path:
     """The folder holding the built-in ``configs/*.yaml`` (source checkout or installed data files)."""

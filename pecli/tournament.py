@@ -32,7 +32,7 @@ from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, ZooError, read_metadata
+from pecli.zoo import LAST, RESUME_DIR, ZooError, read_metadata
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
@@ -136,8 +136,8 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
     """Players from zoo folders, run folders, checkpoint files, exported models, ``module:Class`` strings
     and policy families such as ``hj`` (which join both sides when they play both roles).
 
-    A folder contributes every checkpoint with metadata below it, except ``last`` (the resume copy
-    of a run); exported models (``.onnx``) join only when named. Checkpoints of another scenario,
+    A folder contributes every checkpoint with metadata below it, except ``last`` and a run's durable
+    state (``resume/``), copies of checkpoints; exported models (``.onnx``) join only when named. Checkpoints of another scenario,
     and files without metadata, are skipped and listed.
     """
     players: dict[Role, list[Player]] = {role: [] for role in ROLES}
@@ -150,7 +150,7 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
         if family_of(entry) is not None or (path.is_file() and path.suffix.lower() not in (".zip", ".onnx")):
             candidates = _policy_players(entry, scenario)
         elif path.is_dir():
-            found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST]
+            found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST and RESUME_DIR not in p.parts]
             if not found:
                 raise PecliError(f"no checkpoints under {entry}")
             candidates = [_checkpoint_player(p, scenario, skipped) for p in found]

@@ -11,9 +11,9 @@ Layout of one run::
             ep0000250.json   its metadata (see :class:`CheckpointMeta`)
             final.zip/.json  the end of training
             best.zip/.json   with ``eval_every``: the checkpoint of the run's best evaluation so far
-            last.zip/.json   where an interrupted run resumes from, with
-            replay_buffer.pkl  its replay buffer, and
-            belief_fit.pt    a learned belief's own buffer and optimiser
+            last.zip/.json   the newest durable state's model (where a stopped run resumes from)
+            resume/          the durable state: model, optimisers, buffers (pecli.rl.durable)
+        run.json             what the run is: command, role, opponent, seed (what a resume keeps)
 
 Every file is written atomically.
 """
@@ -21,9 +21,12 @@ Every file is written atomically.
 from __future__ import annotations
 
 import json
+import os
 import platform
 import shlex
+import shutil
 import sys
+import tempfile
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -40,8 +43,8 @@ from pecli.scenario import Scenario, scenario_from_dict
 FINAL = "final"
 LAST = "last"
 BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
-REPLAY_BUFFER = "replay_buffer.pkl"
-BELIEF_STATE = "belief_fit.pt"
+JOB_FILE = "run.json"
+RESUME_DIR = "resume"  # per role: the learner's durable state (pecli.rl.durable)
 
 
 class ZooError(PecliError):
@@ -55,7 +58,7 @@ class CheckpointMeta:
     role: Role
     steps: int  # learner transitions trained on
     episodes: int  # episodes finished while training
-    algo: str  # td3 | ddpg
+    algo: str  # a name of pecli.rl.algorithms.ALGORITHMS: td3 | ddpg | ...
     belief: str  # none | bimdn | ...
     scenario: str  # scenario name
     scenario_hash: str  # Scenario.fingerprint(): a checkpoint only plays the game it learned
@@ -71,8 +74,25 @@ class CheckpointMeta:
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.rl.algorithms.policy_kwargs: rebuilds the network
+    belief_kwargs: dict[str, Any] | None = None  # the actor's BeliefModel arguments, with a belief
     pecli_version: str = __version__
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
+
+    def __post_init__(self) -> None:
+        """Refuse values that cannot describe a checkpoint (a hand-edited or damaged file): ``ValueError``."""
+        if self.role not in ("pursuer", "evader"):
+            raise ValueError(f"role must be pursuer or evader, not {self.role!r}")
+        for name, least in (("steps", 0), ("episodes", 0), ("frame_skip", 1), ("frame_stack", 1),
+                            ("history_length", 1), ("history_stride", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise ValueError(f"{name} must be a whole number >= {least}, not {value!r}")
+        for name in ("algo", "belief", "scenario", "scenario_hash", "opponent"):
+            if not isinstance(getattr(self, name), str):
+                raise ValueError(f"{name} must be a string, not {getattr(self, name)!r}")
+        if not isinstance(self.policy_kwargs, dict) or not isinstance(self.belief_kwargs, dict | None):
+            raise ValueError("policy_kwargs and belief_kwargs must be JSON objects")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -98,7 +118,7 @@ def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
         if not isinstance(data, dict):
             raise TypeError("not a JSON object")
         return CheckpointMeta.from_dict(data)
-    except (json.JSONDecodeError, TypeError, OSError) as exc:
+    except (json.JSONDecodeError, TypeError, ValueError, OSError) as exc:
         raise ZooError(f"{path}: damaged metadata ({exc})") from None
 
 
@@ -136,19 +156,27 @@ class Run:
             raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
 
     @classmethod
-    def create(cls, zoo: Path, name: str, scenario: Scenario) -> Run:
-        """Make a new run folder; :class:`ZooError` if one of that name exists."""
+    def create(cls, zoo: Path, name: str, scenario: Scenario, job: dict[str, Any]) -> Run:
+        """Make a new run folder holding its config, versions, command and ``job`` (see :meth:`write_job`);
+        :class:`ZooError` if one of that name exists. The folder appears whole or not at all."""
         cls.check_new(zoo, name)
         path = zoo / name
         try:
-            path.mkdir(parents=True)
+            zoo.mkdir(parents=True, exist_ok=True)
+            staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=zoo))
         except OSError as exc:
             raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
-        run = cls(path)
+        run = cls(staging)
         run.write_config(scenario)
-        atomic_write_json(path / "versions.json", versions())
+        atomic_write_json(staging / "versions.json", versions())
+        run.write_job(job)
         run.log_command()
-        return run
+        try:
+            staging.rename(path)
+        except OSError as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
+        return cls(path)
 
     @classmethod
     def open(cls, zoo: Path, name: str) -> Run:
@@ -196,47 +224,35 @@ class Run:
         atomic_write_json(metadata_path(path), meta.to_dict())
         return path
 
-    def save_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None, tag: str = "") -> Path:
-        """Write the model's replay buffer (and, given a ``FitBelief``, the belief's buffer and optimiser)
-        as ``replay_buffer<tag>.pkl`` (and ``belief_fit<tag>.pt``)."""
-        path = self.role_dir(role) / buffer_name(REPLAY_BUFFER, tag)
+    def publish(self, source: Path, role: Role, name: str, meta: CheckpointMeta) -> Path:
+        """Make the model file ``source`` (a durable state's) the checkpoint ``name`` of ``role`` too, with
+        ``meta``: a hard link where the file system allows one (no second copy is written), else a copy."""
+        path = self.checkpoint(role, name)
         with atomic_path(path) as tmp:
-            model.save_replay_buffer(tmp)
-        if belief_fit is not None:
-            import torch
-
-            with atomic_path(self.role_dir(role) / buffer_name(BELIEF_STATE, tag)) as tmp:
-                torch.save(belief_fit.state_dict(), tmp)
+            tmp.unlink()
+            try:
+                os.link(source, tmp)
+            except OSError:
+                shutil.copyfile(source, tmp)
+        atomic_write_json(metadata_path(path), meta.to_dict())
         return path
 
-    def load_replay_buffer(self, model: Any, role: Role, belief_fit: Any = None, tag: str = "") -> list[str]:
-        """Load what :meth:`save_replay_buffer` wrote; returns the names of the files that are missing.
-        :class:`ZooError` for a damaged one."""
-        missing = []
-        path = self.role_dir(role) / buffer_name(REPLAY_BUFFER, tag)
-        state = self.role_dir(role) / buffer_name(BELIEF_STATE, tag)
+    def write_job(self, job: dict[str, Any]) -> None:
+        """Record what the run is (``run.json``): the command and the settings a resume must keep."""
+        atomic_write_json(self.path / JOB_FILE, job)
+
+    def job(self) -> dict[str, Any] | None:
+        """What :meth:`write_job` recorded; ``None`` for a run without it (written by an older pecli)."""
+        path = self.path / JOB_FILE
+        if not path.is_file():
+            return None
         try:
-            if path.is_file():
-                model.load_replay_buffer(path)
-            else:
-                missing.append(path.name)
-            if belief_fit is not None:
-                if state.is_file():
-                    import torch
-
-                    belief_fit.load_state_dict(torch.load(state, weights_only=False))
-                else:
-                    missing.append(state.name)
-        except Exception as exc:  # a truncated pickle, another buffer size: many kinds
-            raise ZooError(f"cannot load the buffers of {self.name}/{role} ({type(exc).__name__}: {exc}); "
-                           "delete them to resume with empty buffers") from None
-        return missing
-
-
-def buffer_name(name: str, tag: str) -> str:
-    """``replay_buffer.pkl`` with ``tag`` ``-r003`` → ``replay_buffer-r003.pkl``."""
-    stem, dot, suffix = name.partition(".")
-    return f"{stem}{tag}{dot}{suffix}"
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, OSError) as exc:
+            raise ZooError(f"{path}: damaged ({exc})") from None
+        if not isinstance(data, dict):
+            raise ZooError(f"{path}: damaged (not a JSON object)")
+        return data
 
 
 @dataclass

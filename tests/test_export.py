@@ -59,7 +59,7 @@ def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pu
     if isinstance(env, BeliefVecEnv):
         env.set_belief(model.policy.actor.features_extractor.belief)
     model.learn(80)  # 50 transitions of warm-up, then a few updates
-    return Run.create(zoo, name, scenario).save(model, role, "final", checkpoint_meta(job, model, 0))
+    return Run.create(zoo, name, scenario, {"command": "test"}).save(model, role, "final", checkpoint_meta(job, model, 0))
 
 
 @pytest.fixture(scope="module")

@@ -110,3 +110,11 @@ def test_a_learned_policy_plays_exactly_as_in_its_training_view(quick: Scenario)
             np.testing.assert_allclose(played, action, atol=1e-6)
             game_obs = game.step(played, greedy.act(game_obs["evader"])).obs
         np.testing.assert_allclose(game.state(), view.core.game.state(), atol=1e-5)
+
+
+def test_unknown_algorithm_is_refused() -> None:
+    from pecli.errors import PolicyError
+    from pecli.rl.algorithms import get_algorithm
+
+    with pytest.raises(PolicyError, match="unknown algorithm 'ppo'"):
+        get_algorithm("ppo")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import math
 import sys
 from pathlib import Path
@@ -162,7 +163,8 @@ def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path,
     for role in ("pursuer", "evader"):
         for r in (1, 2):
             assert (run / role / f"round-00{r}.zip").is_file()
-        assert (run / role / "replay_buffer-r002.pkl").is_file()
+        state = json.loads((run / role / "resume" / "state.json").read_text())  # the learner's durable state
+        assert state["extra"]["round"] == 2 and state["replay"]["added"] > 0
     assert len(lines) == 2 and lines[0].startswith("round 1/2: pursuer captures")
     p1, e1, p2 = (read_metadata(run / path) for path in ("pursuer/round-001.zip", "evader/round-001.zip",
                                                          "pursuer/round-002.zip"))
@@ -189,18 +191,14 @@ BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8
 
 
 @pytest.mark.parametrize("case", ["mid-curriculum", "bimdn", "commit-window"])
-def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
-    quick: Scenario, tmp_path: Path, monkeypatch, case: str
-) -> None:
-    """Stopped while the evader trains in round 2 (the curriculum still running, or a learned belief),
-    or after the pursuer's round-2 checkpoint was written but before the state named it."""
+def test_an_interrupted_run_resumes_inside_its_turn(quick: Scenario, tmp_path: Path, monkeypatch, case: str) -> None:
+    """Stopped while the evader trains in round 2 (the curriculum still running, or a learned belief): the
+    turn goes on from the commit made at the stop, the same way from a copy of it. Stopped after the
+    pursuer's round-2 state was committed but before selfplay.json named the turn: nothing is trained
+    again, and the run ends exactly as if never stopped."""
     settings = {"curriculum.fraction": 1.0, **(BIMDN if case == "bimdn" else {})}
     SelfPlay(job(quick, tmp_path / "ref", "sp", **settings)).run()
     reference = tmp_path / "ref" / "sp"
-    if case == "bimdn":
-        assert (reference / "evader" / "belief_fit-r002.pt").is_file()
-    assert not (reference / "evader" / "replay_buffer-r001.pkl").exists()  # superseded buffers are deleted
-
     if case == "commit-window":
         original_save = SelfPlay._save_state
 
@@ -230,12 +228,25 @@ def test_an_interrupted_run_resumes_at_its_turn_and_ends_as_if_never_stopped(
     assert (stop.value.round, stop.value.role) == expected
     assert not (tmp_path / "sp" / "evader" / "round-002.zip").exists()
     monkeypatch.undo()
+    if case != "commit-window":
+        committed = json.loads((tmp_path / "sp" / "evader" / "resume" / "state.json").read_text())
+        assert committed["extra"]["round"] == 2 and committed["steps"] > committed["extra"]["start_steps"]  # kept
+        shutil.copytree(tmp_path / "sp", tmp_path / "copy" / "sp")
 
-    resumed = job(quick, tmp_path, "sp", **settings)
-    resumed.resume = True
-    SelfPlay(resumed).run()
+    for zoo in [tmp_path] + ([tmp_path / "copy"] if case != "commit-window" else []):
+        resumed = job(quick, zoo, "sp", **settings)
+        resumed.resume = True
+        SelfPlay(resumed).run()
     for role in ("pursuer", "evader"):
-        assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip"))
+        final = read_metadata(tmp_path / "sp" / role / "round-002.zip")
+        assert final.steps == read_metadata(reference / role / "round-002.zip").steps  # the budget, not more
+        if case == "commit-window":
+            assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip"))
+        else:  # reproducible from the commit
+            assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"),
+                            parameters(tmp_path / "copy" / "sp" / role / "round-002.zip"))
+    turns = read_state(type("R", (), {"path": tmp_path / "sp", "name": "sp"})()).turns
+    assert [(t.round, t.role) for t in turns] == [(1, "pursuer"), (1, "evader"), (2, "pursuer"), (2, "evader")]
 
 
 def test_pfsp_priors_come_from_the_zoos_tournament_by_role(finished: tuple[Path, list[str]]) -> None:

@@ -11,6 +11,7 @@ from unittest import mock
 
 import numpy as np
 import pytest
+import torch as th
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -49,7 +50,9 @@ def test_a_run_writes_the_zoo_layout(trained: Path) -> None:
     assert "pecli" in json.loads((run / "versions.json").read_text())
     assert "train pursuer" in (run / "command.txt").read_text()
     role = run / "pursuer"
-    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
+    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "resume" / "state.json").is_file()
+    assert json.loads((run / "run.json").read_text()) == {"command": "train", "role": "pursuer", "opponent": "greedy",
+                                                           "seed": 0}
     periodic = sorted(role.glob("ep*.zip"))
     assert periodic, "expected checkpoints every 3 episodes"
     meta = json.loads((role / "final.json").read_text())
@@ -73,8 +76,17 @@ def test_a_checkpoint_plays_as_a_policy(trained: Path, quick: Scenario) -> None:
 
 def test_a_checkpoint_refuses_another_scenario_or_role(trained: Path, paper: Scenario, quick: Scenario) -> None:
     final = str(trained / "run" / "pursuer" / "final.zip")
-    with pytest.raises(PolicyError, match="trained on scenario 'quick'"):
+    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'paper' in arena.height 8.0 there, "
+                                          "16.0 here; arena.width 8.0 there, 16.0 here; horizon 150 there, 400 here:"):
         resolve_policy(final, "pursuer", paper)
+    longer = quick.model_copy(update={"horizon": 200})  # the same name, another game: say what differs
+    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'quick' in horizon 150 there, 200 here:"):
+        resolve_policy(final, "pursuer", longer)
+    copy = Path(final).parent.parent.parent / "loose.zip"  # no run config beside it: names and fingerprints
+    copy.write_bytes(Path(final).read_bytes())
+    copy.with_suffix(".json").write_text(Path(final).with_suffix(".json").read_text())
+    with pytest.raises(PolicyError, match=r"trained on scenario 'quick' \(fingerprint \w+\), another game than 'quick'"):
+        resolve_policy(str(copy), "pursuer", longer)
     with pytest.raises(PolicyError, match="is a pursuer checkpoint; it cannot play evader"):
         resolve_policy(final, "evader", quick)
 
@@ -84,7 +96,7 @@ def test_damaged_checkpoints_give_clear_errors(trained: Path, tmp_path: Path, qu
     truncated = tmp_path / "truncated.zip"
     truncated.write_bytes(source.read_bytes()[:500])
     truncated.with_suffix(".json").write_text(source.with_suffix(".json").read_text())
-    with pytest.raises(PolicyError, match="cannot load"):
+    with pytest.raises(PolicyError, match=r"truncated.zip: not a checkpoint \(damaged or not a zip file\)"):
         resolve_policy(str(truncated), "pursuer", quick)
     orphan = tmp_path / "orphan.zip"
     orphan.write_bytes(source.read_bytes())
@@ -147,8 +159,9 @@ def test_ctrl_c_saves_a_resumable_checkpoint(tmp_path: Path, monkeypatch) -> Non
     assert result.exit_code == 130
     assert "--resume --name run" in result.output
     role = tmp_path / "run" / "pursuer"
-    assert (role / "last.zip").is_file() and (role / "replay_buffer.pkl").is_file()
-    assert 0 < json.loads((role / "last.json").read_text())["steps"] < 5000
+    state = json.loads((role / "resume" / "state.json").read_text())
+    assert 0 < json.loads((role / "last.json").read_text())["steps"] == state["steps"] < 5000
+    assert state["replay"]["added"] > 0  # the buffer is part of the saved state
 
 
 def test_bad_settings_are_refused(tmp_path: Path) -> None:
@@ -217,3 +230,23 @@ def test_the_best_evaluation_depends_on_the_role(tmp_path: Path, maximise: bool,
     for _ in range(5):
         callback.record()
     assert best == saved  # each better than the log's 0.3 and than every earlier one
+
+
+def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
+    """Training is bit-reproducible on one thread: the same command twice gives the same networks."""
+    from pecli.rl.checkpoint import read_weights
+
+    for zoo in ("a", "b"):
+        assert train(tmp_path / zoo, "--steps", "600").exit_code == 0
+    ours, theirs = (read_weights(tmp_path / zoo / "run" / "pursuer" / "final.zip")[0] for zoo in ("a", "b"))
+    for key, value in ours["policy"].items():
+        assert th.equal(value, theirs["policy"][key]), key
+
+
+def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> None:
+    from pecli.rl.train import forget_evaluations_after
+
+    log = tmp_path / "eval_pursuer.csv"
+    log.write_text("steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n300,3.0,3.0,0.6\n30")
+    forget_evaluations_after(log, 200)  # evaluated at 300 after the commit at 200, then killed mid-line
+    assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"

@@ -37,6 +37,21 @@ from pecli.policies.base import Policy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, Training
 
+ACTION_SPACE = spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+
+def observation_space(game: Game, role: Role, training: Training, history: bool = True) -> spaces.Dict:
+    """The learner's ``Dict`` observation space (see the module's docstring) for ``game``'s layout."""
+    dim = game.obs_dim[role]
+    boxes = {"obs": spaces.Box(-1.0, 1.0, (training.frame_stack * dim,), np.float32)}
+    if history:
+        samples = -(-training.history_length // training.history_stride)  # as HistoryWindow keeps
+        boxes["history"] = spaces.Box(-1.0, 1.0, (samples * dim,), np.float32)
+    boxes["state"] = spaces.Box(-1.0, 1.0, (game.state_dim + 1,), np.float32)
+    boxes["opp_action"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
+    return spaces.Dict(boxes)
+
+
 class FrozenOpponentCore:
     """``n`` games seen by the ``role`` learner, with ``opponent`` playing the other side."""
 
@@ -62,13 +77,8 @@ class FrozenOpponentCore:
         t = self.training
         self.stack = FrameStack(n, dim, t.frame_stack)
         self.history = HistoryWindow(n, dim, t.history_length, t.history_stride) if history else None
-        boxes = {"obs": spaces.Box(-1.0, 1.0, (t.frame_stack * dim,), np.float32)}
-        if self.history is not None:
-            boxes["history"] = spaces.Box(-1.0, 1.0, (self.history.samples * dim,), np.float32)
-        boxes["state"] = spaces.Box(-1.0, 1.0, (self.game.state_dim + 1,), np.float32)
-        boxes["opp_action"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.observation_space = spaces.Dict(boxes)
-        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.observation_space = observation_space(self.game, role, t, history)
+        self.action_space = ACTION_SPACE
         self.render_mode = None
         self._opponent_obs = np.zeros((n, self.game.obs_dim[self.opponent_role]), np.float32)
         self._opponent_action = np.zeros((n, 2))

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from typing import Annotated
 
 import typer
 
 from pecli import __version__
+from pecli.trust import TRUST_VARIABLE
 from pecli.cli import config, export, hj, play, selfplay, tournament, train, zoo
 
 app = typer.Typer(
@@ -31,11 +33,19 @@ def _root(
     version: Annotated[
         bool, typer.Option("--version", "-V", callback=_version, is_eager=True, help="Print the version and exit.")
     ] = False,
+    trust: Annotated[
+        bool,
+        typer.Option("--trust", help="Allow unpickling files that need it (checkpoints of an older pecli): only for "
+                     "files from a source you trust, as unpickling runs any code in them. Same as PECLI_TRUST=1."),
+    ] = False,
 ) -> None:
     """Pursuit-evasion between car-like robots with limited sensors (Gonultas & Isler).
 
     Every command takes a scenario with [bold]--config[/] (a YAML file or a built-in name).
+    pecli reads checkpoints as data: loading one never runs code from it (see README, "Safety").
     """
+    if trust:
+        os.environ[TRUST_VARIABLE] = "1"  # read where files load, worker processes included
 
 
 app.command(name="play", rich_help_panel="Play and evaluate")(play.play)

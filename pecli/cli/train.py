@@ -46,7 +46,7 @@ def train(
     seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-role-seed-time).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its last checkpoint.")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,
     overrides: Annotated[
         list[str] | None,
         typer.Option("--set", help="Override a training setting, e.g. --set batch_size=256 --set curriculum.enabled=false."),
@@ -56,8 +56,9 @@ def train(
     """Train a pursuer or an evader with Stable-Baselines3 against a frozen opponent.
 
     Hyperparameters come from the config's [bold]training[/] section (the paper's values in
-    paper.yaml). Checkpoints go to [bold]zoo/<run>/<role>/[/] every checkpoint_every episodes;
-    Ctrl-C saves the run so that [bold]--resume[/] continues it with its replay buffer.
+    paper.yaml). Checkpoints go to [bold]zoo/<run>/<role>/[/] every checkpoint_every episodes, each
+    with the run's durable state: however the run stops (Ctrl-C, a kill, a power cut), [bold]--resume[/]
+    continues it from its newest checkpoint, replay buffer included.
     TensorBoard logs are in zoo/<run>/tb.
     """
     from pecli.rl.train import (
@@ -69,7 +70,7 @@ def train(
         with_overrides,
     )
     from pecli.rl.train import train as run_training
-    from pecli.zoo import LAST, Run, read_metadata
+    from pecli.zoo import Run
 
     role_name = role.value
     settings = parse_overrides(overrides or [])
@@ -85,18 +86,21 @@ def train(
             raise PecliError("--resume needs the --name of the run to continue")
         run = Run.open(zoo, name)
         scenario = resumed_scenario(run.scenario(), config, name)
-        last = run.checkpoint(role_name, LAST)
-        if not last.is_file():
-            raise PecliError(f"run '{name}' has no {role_name}/{LAST}.zip to resume from")
-        meta = read_metadata(last)
-        for option, given, kept in (("--opponent", opponent, meta.opponent), ("--seed", seed, meta.seed)):
-            if given is not None and given != kept:
-                raise PecliError(f"run '{name}' trains with {option} {kept}; a resumed run keeps it")
-        unchanged = {key for key, kept in (("algo", meta.algo), ("belief", meta.belief)) if settings.get(key) == kept}
+        kept = run.job()
+        if kept is None or kept.get("command") != "train":
+            what = "an older pecli's run (no run.json)" if kept is None else f"a {kept.get('command')} run"
+            raise PecliError(f"run '{name}' is {what}: `pecli train --resume` cannot continue it")
+        if kept["role"] != role_name:
+            raise PecliError(f"run '{name}' trains the {kept['role']}, not the {role_name}")
+        for option, given, value in (("--opponent", opponent, kept["opponent"]), ("--seed", seed, kept["seed"])):
+            if given is not None and given != value:
+                raise PecliError(f"run '{name}' trains with {option} {value}; a resumed run keeps it")
+        t = scenario.training
+        unchanged = {key for key, value in (("algo", t.algo), ("belief", t.belief)) if settings.get(key) == value}
         changed = sorted(set(settings) - {"steps"} - unchanged)
         if changed:
             raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
-        opponent, seed, curriculum_steps = meta.opponent, meta.seed, scenario.training.steps
+        opponent, seed, curriculum_steps = kept["opponent"], kept["seed"], t.steps
     else:
         scenario = load_scenario(config or "paper")
     if settings:
@@ -123,7 +127,7 @@ def train(
 
     previous = signal.signal(signal.SIGTERM, interrupt)
     try:
-        final = run_training(job, on_start=started)
+        final = run_training(job, on_start=started, report=lambda line: err_console.print(line, highlight=False))
     except TrainingInterrupted as stop:
         err_console.print(f"[yellow]interrupted[/]: saved {stop.checkpoint}; "
                           f"continue with --resume --name {job.name}", highlight=False)

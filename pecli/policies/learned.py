@@ -7,26 +7,15 @@ this module runs the actor (belief network included) at each decision.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch as th
 
-from pecli.errors import PolicyError
+from pecli.errors import PecliError, PolicyError
 from pecli.policies.windowed import Draws, WindowedPolicy
 from pecli.roles import Role
 from pecli.scenario import Scenario
 from pecli.zoo import CheckpointMeta, ZooError, read_metadata
-
-
-def algorithm_class(algo: str) -> Any:
-    """The SB3 algorithm class of ``algo`` (``td3`` or ``ddpg``)."""
-    from stable_baselines3 import DDPG, TD3
-
-    classes = {"td3": TD3, "ddpg": DDPG}
-    if algo not in classes:
-        raise PolicyError(f"unknown algorithm '{algo}' (known: {', '.join(classes)})")
-    return classes[algo]
 
 
 class LearnedPolicy(WindowedPolicy):
@@ -69,15 +58,15 @@ class LearnedPolicy(WindowedPolicy):
         if meta.role != role:
             raise PolicyError(f"{path} is a {meta.role} checkpoint; it cannot play {role}")
         if meta.scenario_hash != scenario.fingerprint():
-            raise PolicyError(
-                f"{path} was trained on scenario '{meta.scenario}' ({meta.scenario_hash}), not on "
-                f"'{scenario.name}' ({scenario.fingerprint()}): pass the config it was trained with"
-            )
+            raise PolicyError(f"{path} was trained on {_scenario_mismatch(path, meta, scenario)}: "
+                              "pass the config it was trained with")
+        from pecli.rl.checkpoint import load_policy  # SB3 and the networks load only when a checkpoint is asked for
+
         try:
-            model = algorithm_class(meta.algo).load(path, device="cpu")
-        except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
-            raise PolicyError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
-        return cls(model.policy.actor, role, scenario, meta, seed=seed)
+            policy = load_policy(path, meta, scenario)
+        except ZooError as exc:
+            raise PolicyError(str(exc)) from None
+        return cls(policy.actor, role, scenario, meta, seed=seed)
 
     def current_belief(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The belief given the window of the last :meth:`act`, for drawing, for the first ``games`` games:
@@ -105,3 +94,22 @@ class LearnedPolicy(WindowedPolicy):
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"
+
+
+def _scenario_mismatch(path: Path, meta: CheckpointMeta, scenario: Scenario) -> str:
+    """How the game ``path`` learned differs from ``scenario``: the differing keys when its run's config is
+    beside it, else the two names and fingerprints."""
+    from pecli.zoo import Run
+
+    config = path.parent.parent / "config.yaml"
+    if config.is_file():
+        try:
+            trained = Run(path.parent.parent).scenario()
+        except PecliError:
+            trained = None
+        if trained is not None and trained.fingerprint() == meta.scenario_hash:
+            changes = [f"{key} {theirs!r} there, {ours!r} here" for key, ours, theirs in scenario.differences(trained)]
+            more = f" and {len(changes) - 3} more" if len(changes) > 3 else ""
+            return f"'{meta.scenario}', which differs from '{scenario.name}' in " + "; ".join(changes[:3]) + more
+    return (f"scenario '{meta.scenario}' (fingerprint {meta.scenario_hash}), another game than '{scenario.name}' "
+            f"({scenario.fingerprint()})")

@@ -34,33 +34,35 @@ class BeliefBuffer:
         self.target = np.zeros((capacity, 2), dtype=np.float32)
         self.unseen = np.zeros(capacity, dtype=bool)
         self.capacity, self.size, self.cursor = capacity, 0, 0
+        self.added = 0  # pairs ever added
         self.rng = np.random.default_rng(seed)
 
     def add(self, history: np.ndarray, target: np.ndarray, unseen: np.ndarray) -> None:
         """Append ``n`` pairs (rows of each array), overwriting the oldest when full."""
         rows = (self.cursor + np.arange(history.shape[0])) % self.capacity
         self.history[rows], self.target[rows], self.unseen[rows] = history, target, unseen
-        self.cursor = int((self.cursor + history.shape[0]) % self.capacity)
-        self.size = min(self.size + history.shape[0], self.capacity)
+        self.set_count(self.added + history.shape[0])
+
+    def set_count(self, added: int) -> None:
+        """Make the buffer hold the newest of ``added`` pairs (a restored buffer's arrays already hold them)."""
+        self.added = added
+        self.cursor, self.size = added % self.capacity, min(added, self.capacity)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The ring's arrays, ``(capacity, ...)`` each, by name (for saving and restoring)."""
+        return {"history": self.history, "target": self.target, "unseen": self.unseen}
 
     def sample(self, batch: int) -> tuple[th.Tensor, th.Tensor, np.ndarray]:
         index = self.rng.integers(0, self.size, size=batch)
         return th.as_tensor(self.history[index]), th.as_tensor(self.target[index]), self.unseen[index]
 
-    def state_dict(self) -> dict[str, Any]:
-        """The filled part of the buffer, its cursor and its sampling RNG."""
-        return {"history": th.as_tensor(self.history[: self.size]), "target": th.as_tensor(self.target[: self.size]),
-                "unseen": th.as_tensor(self.unseen[: self.size]), "cursor": self.cursor,
-                "capacity": self.capacity, "rng": self.rng.bit_generator.state}
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        size = state["history"].shape[0]
-        if state["capacity"] != self.capacity or state["history"].shape[1] != self.history.shape[1]:
-            raise ValueError("the saved belief buffer has another capacity or window size")
-        self.history[:size], self.target[:size] = state["history"].numpy(), state["target"].numpy()
-        self.unseen[:size] = state["unseen"].numpy()
-        self.size, self.cursor = size, int(state["cursor"])
-        self.rng.bit_generator.state = state["rng"]
+def belief_observation_space(view: spaces.Dict, features_dim: int) -> spaces.Dict:
+    """The view's space with its ``history`` window replaced by ``belief`` features, as the replay buffer stores it."""
+    space = dict(view.spaces)
+    del space["history"]
+    space = {"obs": space["obs"], "belief": spaces.Box(-np.inf, np.inf, (features_dim,), np.float32), **space}
+    return spaces.Dict(space)
 
 
 class BeliefVecEnv(VecEnvWrapper):
@@ -86,12 +88,8 @@ class BeliefVecEnv(VecEnvWrapper):
             raise ValueError("the view must be built with history=True to feed a belief")
         role: Role = core.role
         self.belief, self.buffer = belief, buffer
-        features = features_dim
-        space = dict(venv.observation_space.spaces)
-        del space["history"]
-        self._features_dim = features
-        space = {"obs": space["obs"], "belief": spaces.Box(-np.inf, np.inf, (features,), np.float32), **space}
-        super().__init__(venv, observation_space=spaces.Dict(space))
+        self._features_dim = features_dim
+        super().__init__(venv, observation_space=belief_observation_space(venv.observation_space, features_dim))
         # where the truth is: the opponent's (x, y) in the normalised state, and the newest seen flag
         self._target = slice(0, 2) if role == "evader" else slice(core.game.dynamics["pursuer"].state_dim,
                                                                       core.game.dynamics["pursuer"].state_dim + 2)
@@ -146,14 +144,6 @@ class FitBelief(BaseCallback):
         if vector_steps % s.update_every == 0 and self.buffer.size >= max(s.warmup, 1):
             self.update()
         return True
-
-    def state_dict(self) -> dict[str, Any]:
-        """What a resumed run needs to fit on as if never stopped: the buffer and the optimiser."""
-        return {"buffer": self.buffer.state_dict(), "optimizer": self.optimizer.state_dict()}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.buffer.load_state_dict(state["buffer"])
-        self.optimizer.load_state_dict(state["optimizer"])
 
     def update(self) -> float:
         history, target, unseen = self.buffer.sample(self.settings.batch_size)

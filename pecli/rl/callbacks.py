@@ -207,10 +207,25 @@ class PoolTracker(BaseCallback):
         self.episodes = 0
         self.captures = 0
         self.per_opponent: dict[str, list[int]] = {name: [0, 0] for name in opponent.names}  # [episodes, wins]
+        self.listeners: list[Callable[[int], None]] = []  # called with the episodes so far when some finish
 
     @property
     def capture_rate(self) -> float:
         return self.captures / self.episodes if self.episodes else float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"episodes": self.episodes, "captures": self.captures, "per_opponent": self.per_opponent}
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Continue the records of :meth:`to_dict` (a turn resumed), crediting them to the pool again."""
+        self.episodes, self.captures = int(data["episodes"]), int(data["captures"])
+        for name, (episodes, wins) in data["per_opponent"].items():
+            self.per_opponent[name] = [episodes, wins]
+            entry = self.pool.entry(name)
+            entry.episodes += episodes
+            entry.wins += wins
+        if self.weigh is not None:
+            self.opponent.weights = self.weigh(self.pool)
 
     def _on_step(self) -> bool:
         finished = [info for info in self.locals["infos"] if "opponent" in info]
@@ -226,6 +241,8 @@ class PoolTracker(BaseCallback):
             self.logger.record("selfplay/capture_rate", self.capture_rate)
             if self.weigh is not None:
                 self.opponent.weights = self.weigh(self.pool)
+            for listener in self.listeners:
+                listener(self.episodes)
         return True
 
 

@@ -12,12 +12,13 @@ A run in the zoo::
         config.yaml, command.txt, versions.json, tb/     as for ``pecli train``
         selfplay.json                the state: pools and their records, finished turns, seeds
         pursuer/round-001.zip/.json  the pursuer after round 1, with its lineage in the metadata
-        pursuer/replay_buffer-r003.pkl  the pursuer's replay buffer after its last finished turn (round 3)
-        pursuer/belief_fit-r003.pt   with a learned belief: its own buffer and optimiser
+        pursuer/resume/              the pursuer's durable state (pecli.rl.durable): model, optimisers, buffers
         evader/...
 
-``selfplay.json`` is written after a turn's checkpoint and buffers, and names them: it is the
-commit point, so an interrupted run resumes at the turn it was in, from files of finished turns.
+Each learner commits its durable state every ``checkpoint_every`` episodes of its turn, with the
+turn's progress (steps, opponent records), and at the end of the turn; then ``selfplay.json``
+records the finished turn. A run stopped in any way resumes inside the turn it was in, from the
+learner's newest commit: at most one checkpoint interval is lost.
 """
 
 from __future__ import annotations
@@ -37,16 +38,16 @@ from pecli.errors import PecliError
 from pecli.io import atomic_write_json
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
-from pecli.policies.learned import algorithm_class
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
-from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model
+from pecli.rl.durable import DurableState
+from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.zoo import BELIEF_STATE, REPLAY_BUFFER, Run, buffer_name, tournament_ratings
+from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 
 STATE_FILE = "selfplay.json"
 
@@ -83,7 +84,6 @@ class Turn:
     cpu_seconds: float
     checkpoint: str  # run-relative
     opponents: int  # entries in the opponents' pool during the turn
-    buffers: str = ""  # tag of the learner's buffer files after the turn (``replay_buffer<tag>.pkl``)
 
     @property
     def capture_rate(self) -> float:
@@ -120,7 +120,7 @@ class SelfPlayState:
             seed=int(data["seed"]),
             curriculum_steps=int(data["curriculum_steps"]),
             pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
-            turns=[Turn(**t) for t in data["turns"]],
+            turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
         )
 
 
@@ -156,25 +156,16 @@ def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
 
 
 class Learner:
-    """One side of self-play: its SB3 model, its batched view and the callbacks that outlive a turn."""
+    """One side of self-play: its SB3 model, its batched view, its durable state and the callbacks that outlive a turn."""
 
     def __init__(self, job: SelfPlayJob, role: Role, placeholder: Policy, run: Run, state: SelfPlayState) -> None:
-        """Build the learner of ``role`` afresh, or from its newest round checkpoint and buffers when it has one."""
+        """Build the learner of ``role`` afresh, or from its durable state when it has one."""
         self.role = role
         self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
                                   seed=job.seed)
         self.env = make_env(self.train_job, placeholder, job.seed)
-        latest = state.latest(role)
         t = job.scenario.training
-        if latest is None:
-            self.model = make_model(self.train_job, self.env, run.path / "tb")
-        else:
-            path = run.path / latest.checkpoint
-            try:
-                self.model = algorithm_class(t.algo).load(path, env=self.env, device="cpu",
-                                                          tensorboard_log=str(run.path / "tb"))
-            except Exception as exc:  # a damaged zip: SB3 raises many kinds
-                raise PecliError(f"cannot resume from {path}: {type(exc).__name__}: {exc}") from None
+        self.model = make_model(self.train_job, self.env, run.path / "tb")
         self.callbacks: list[Any] = []
         self.curriculum: CurriculumCallback | None = None
         if t.curriculum.enabled:
@@ -187,9 +178,22 @@ class Learner:
             if belief.learned and self.env.buffer is not None:
                 self.fit = FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half)
                 self.callbacks.append(self.fit)
-        self.missing: list[str] = []
-        if latest is not None:
-            self.missing = run.load_replay_buffer(self.model, role, self.fit, tag=latest.buffers)
+        self.durable = DurableState(run.role_dir(role) / RESUME_DIR)
+        record = self.durable.read()
+        if record is not None:
+            self.durable.restore(record, self.model, self.fit)
+        elif state.latest(role) is not None:
+            raise PecliError(f"run '{run.name}' was written by an older pecli (its {role} has no {RESUME_DIR}/ state), "
+                             "which this one cannot resume; its checkpoints still play (with --trust)")
+        else:
+            self.durable.clear()  # what a stop before the first commit left
+
+    def progress(self, round: int) -> dict[str, Any] | None:
+        """The committed progress of the learner's turn in ``round`` (``None`` if it has none)."""
+        record = self.durable.record
+        if record is None or record.extra.get("round") != round:
+            return None
+        return record.extra
 
 
 class SelfPlay:
@@ -209,7 +213,7 @@ class SelfPlay:
         else:
             Run.check_new(job.zoo, job.name)
             self.state = initial_state(job.scenario, job.seed)
-            self.run_dir = Run.create(job.zoo, job.name, job.scenario)
+            self.run_dir = Run.create(job.zoo, job.name, job.scenario, {"command": "selfplay", "seed": job.seed})
             self._save_state()
         self._policies: dict[tuple[Role, str], Policy] = {}
         self.learners: dict[Role, Learner] = {}
@@ -257,10 +261,7 @@ class SelfPlay:
     def run(self) -> dict[Role, Path]:
         th.set_num_threads(self.scenario.training.torch_threads)
         for role in ROLES:
-            learner = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
-            if learner.missing:
-                self.report(f"warning: {role} resumes with empty buffers ({', '.join(learner.missing)} not found)")
-            self.learners[role] = learner
+            self.learners[role] = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
         for r in range(1, self.settings.rounds + 1):
             if all(self.state.done(r, role) for role in ROLES):
                 continue
@@ -271,7 +272,9 @@ class SelfPlay:
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
 
     def _turn(self, r: int, role: Role) -> None:
+        """Train ``role`` for round ``r``, or the rest of it when its learner committed part of it."""
         sp, learner = self.settings, self.learners[role]
+        t = self.scenario.training
         other = opponent_of(role)
         pool = self.state.pools[other]
         if self.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
@@ -279,31 +282,62 @@ class SelfPlay:
         weigh = self._weigher(role)
         mixed = self._mixed(other)
         mixed.weights = weigh(pool)
+        tracker = PoolTracker(pool, mixed, weigh if sp.opponents == "pfsp" else None)
         model = learner.model
+        progress = learner.progress(r)
+        if progress is None:
+            progress = {"round": r, "start_steps": int(model.num_timesteps), "cpu_seconds": 0.0}
+        else:  # resumed inside the turn: its records so far
+            tracker.restore(progress["tracker"])
+        seed = turn_seed(self.state.seed, r, role)
+        if model.num_timesteps > progress["start_steps"]:  # new games from a seed of their own
+            seed = resume_seed(seed, int(model.num_timesteps))
         learner.env.env_method("set_opponent", mixed)
         if learner.curriculum is not None:  # the games SB3 starts before any callback runs count too
             learner.curriculum.apply_to(learner.env, model.num_timesteps)
         model.set_env(learner.env, force_reset=True)  # every game starts afresh against the new pool
-        model.set_random_seed(turn_seed(self.state.seed, r, role))
+        model.set_random_seed(seed)
 
-        tracker = PoolTracker(pool, mixed, weigh if sp.opponents == "pfsp" else None)
+        cpu = time.process_time()
+
+        def commit() -> Path:
+            """Commit the learner's durable state with the turn's progress so far."""
+            nonlocal cpu
+            now = time.process_time()
+            progress.update(tracker=tracker.to_dict(), cpu_seconds=progress["cpu_seconds"] + now - cpu)
+            cpu = now
+            episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role) + tracker.episodes
+            run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + progress["cpu_seconds"]
+            return learner.durable.save(model, learner.fit, episodes, run_cpu, extra=dict(progress))
+
+        next_commit = (tracker.episodes // t.checkpoint_every + 1) * t.checkpoint_every
+
+        def checkpoint(episodes: int) -> None:
+            nonlocal next_commit
+            if episodes >= next_commit:
+                commit()
+                next_commit = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
+
+        tracker.listeners.append(checkpoint)
+        remaining = progress["start_steps"] + sp.steps_per_round - int(model.num_timesteps)
         title = f"round {r}/{sp.rounds} · {role} vs {len(pool.entries)} {other}s ({sp.opponents})"
         display = RoundDisplay(tracker, sp.steps_per_round, title, enabled=self.job.progress)
-        cpu = time.process_time()
         try:
             try:
-                model.learn(sp.steps_per_round, callback=CallbackList([*learner.callbacks, tracker, display]),
-                            reset_num_timesteps=False, tb_log_name=role)
+                if remaining > 0:
+                    model.learn(remaining, callback=CallbackList([*learner.callbacks, tracker, display]),
+                                reset_num_timesteps=False, tb_log_name=role)
             finally:
                 display.close()
                 logger = getattr(model, "_logger", None)
                 if logger is not None:
                     logger.close()
-            self._finish_turn(r, role, tracker, time.process_time() - cpu)
+            self._finish_turn(r, role, tracker, commit)
         except KeyboardInterrupt:
+            commit()
             raise SelfPlayInterrupted(r, role) from None
 
-    def _finish_turn(self, r: int, role: Role, tracker: PoolTracker, cpu_seconds: float) -> None:
+    def _finish_turn(self, r: int, role: Role, tracker: PoolTracker, commit: Callable[[], Path]) -> None:
         learner, other = self.learners[role], opponent_of(role)
         previous = self.state.latest(role)
         episodes = sum(t.episodes for t in self.state.turns if t.role == role) + tracker.episodes
@@ -319,19 +353,16 @@ class SelfPlay:
                 for e in self.state.pools[other].entries
             ],
         )
-        # the checkpoint and buffers under this turn's names, then selfplay.json naming them: the one
-        # commit point. A stop before it leaves the previous turn's files, which the state still names.
-        path = self.run_dir.save(learner.model, role, checkpoint_name(r), meta)
-        tag = f"-r{r:03d}"
-        self.run_dir.save_replay_buffer(learner.model, role, learner.fit, tag=tag)
+        # the learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
+        # the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it
+        source = commit()
+        path = self.run_dir.publish(source, role, checkpoint_name(r), meta)
         relative = str(path.relative_to(self.run_dir.path))
         self.state.pools[role].add(f"{role}-r{r:03d}", relative, generation=r)
+        cpu_seconds = learner.durable.record.extra["cpu_seconds"]
         self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), tracker.episodes, tracker.captures,
-                                     round(cpu_seconds, 2), relative, len(tracker.opponent.names), tag))
+                                     round(cpu_seconds, 2), relative, len(tracker.opponent.names)))
         self._save_state()
-        if previous is not None and previous.buffers != tag:
-            for name in (REPLAY_BUFFER, BELIEF_STATE):
-                (self.run_dir.role_dir(role) / buffer_name(name, previous.buffers)).unlink(missing_ok=True)
 
     def _save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())

@@ -17,20 +17,21 @@ import numpy as np
 import torch as th
 import yaml
 from stable_baselines3.common.callbacks import CallbackList
-from stable_baselines3.common.noise import NormalActionNoise
 
 from pecli.errors import PecliError
+from pecli.io import atomic_write_text
 from pecli.match import play_match
 from pecli.policies import resolve_policy
-from pecli.policies.learned import LearnedPolicy, algorithm_class
+from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
+from pecli.rl.durable import DurableState
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.policies import CentralCriticPolicy
+from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import BEST, FINAL, LAST, CheckpointMeta, Run, read_metadata
+from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -121,6 +122,8 @@ def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float
         run=job.name,
         seed=job.seed,
         cpu_seconds=None if cpu_seconds is None else round(cpu_seconds, 2),
+        policy_kwargs=policy_kwargs(t),
+        belief_kwargs=belief_kwargs(job) if t.belief != "none" else None,
     )
 
 
@@ -130,7 +133,7 @@ def belief_kwargs(job: TrainJob) -> dict[str, Any]:
     window_length = -(-t.history_length // t.history_stride)  # observations in the window
     dim = _obs_dim(job.scenario, job.role)
     return {
-        "kind": t.belief, "window": (window_length, dim), "scenario": job.scenario.model_dump(mode="json"),
+        "kind": t.belief, "window": [window_length, dim], "scenario": job.scenario.model_dump(mode="json"),
         "role": job.role, "hidden": b.hidden, "fc": b.fc, "components": b.components, "samples": b.samples,
         "frame": job.scenario.observation_frame,
     }
@@ -159,11 +162,12 @@ def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | 
 def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorboard: Path | None) -> Any:
     """A fresh SB3 model with the paper's hyperparameters from the scenario's training section."""
     t = job.scenario.training
-    policy_kwargs: dict[str, Any] = {"net_arch": list(t.net_arch)}
+    algorithm = get_algorithm(t.algo)
+    kwargs: dict[str, Any] = policy_kwargs(t)
     if t.belief != "none":
-        policy_kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
-    return algorithm_class(t.algo)(
-        CentralCriticPolicy,
+        kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
+    return algorithm.cls(
+        algorithm.policy,
         env,
         learning_rate=t.learning_rate,
         buffer_size=t.buffer_size,
@@ -173,12 +177,12 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
         gamma=t.gamma,
         train_freq=(t.train_freq, "step"),
         gradient_steps=t.gradient_steps,
-        action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
-        policy_kwargs=policy_kwargs,
+        policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
         seed=job.seed,
         device="cpu",
         verbose=0,
+        **algorithm_kwargs(t),
     )
 
 
@@ -208,10 +212,13 @@ def resume_seed(seed: int, steps: int) -> int:
     return int(np.random.SeedSequence([seed, steps]).generate_state(1)[0] % 2**31)
 
 
-def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
+def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
+          report: Callable[[str], None] = lambda line: None) -> Path:
     """Run ``job``; returns the final checkpoint.
 
-    Ctrl-C saves ``last`` with the replay buffer and raises :class:`TrainingInterrupted`.
+    At every checkpoint the learner's durable state (:mod:`pecli.rl.durable`) is committed, so a run
+    stopped in any way resumes (``job.resume``) from its newest checkpoint. Ctrl-C (or SIGTERM, which
+    the CLI turns into one) commits the state of the moment and raises :class:`TrainingInterrupted`.
     """
     cpu_start = process_cpu_seconds()
     t = job.scenario.training
@@ -219,43 +226,58 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
     opponent = resolve_policy(job.opponent, opponent_of(job.role), job.scenario, seed=job.seed)
     if job.resume:
         run = Run.open(job.zoo, job.name)
-        last = run.checkpoint(job.role, LAST)
-        if not last.is_file():
-            raise PecliError(f"run '{job.name}' has no {job.role}/{LAST}.zip to resume from")
-        meta = read_metadata(last)
-        seed = resume_seed(job.seed, meta.steps)
-        env = make_env(job, opponent, seed)
-        model = algorithm_class(t.algo).load(last, env=env, device="cpu", tensorboard_log=str(run.path / "tb"))
-        model.set_random_seed(seed)
-        run.log_command()
-        episodes, cpu_before = meta.episodes, meta.cpu_seconds or 0.0
+        durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
+        record = durable.read()
+        if record is None:
+            _start_over(run, job, durable, report)
     else:
         Run.check_new(job.zoo, job.name)
-        env = make_env(job, opponent, job.seed)
-        model = make_model(job, env, job.zoo / job.name / "tb")
-        run = Run.create(job.zoo, job.name, job.scenario)
-        episodes, cpu_before = 0, 0.0
+        run, durable, record = None, None, None
+    env = make_env(job, opponent, job.seed if record is None else resume_seed(job.seed, record.steps))
+    model = make_model(job, env, job.zoo / job.name / "tb")
+    if run is None:
+        run = Run.create(job.zoo, job.name, job.scenario,
+                         {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed})
+        durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
+    else:
+        run.log_command()
     belief = None
     if isinstance(env, BeliefVecEnv):
         belief = model.policy.actor.features_extractor.belief
         env.set_belief(belief)
+    fit = None
+    if belief is not None and belief.learned and env.buffer is not None:
+        fit = FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half)
+    episodes, cpu_before = 0, 0.0
+    if record is not None:
+        durable.restore(record, model, fit)
+        model.set_random_seed(resume_seed(job.seed, record.steps))
+        episodes, cpu_before = record.episodes, record.cpu_seconds
+        forget_evaluations_after(run.path / f"eval_{job.role}.csv", record.steps)
     if on_start is not None:
         on_start(run)
 
-    def cpu_seconds() -> float:  # the run's CPU time: the stopped processes' (from the checkpoint) and this call's
+    def cpu_seconds() -> float:  # the run's CPU time: the stopped processes' (from the record) and this call's
         return cpu_before + process_cpu_seconds() - cpu_start
 
     def meta_now(episodes: int) -> CheckpointMeta:
         return checkpoint_meta(job, model, episodes, cpu_seconds())
+
+    def commit(episodes: int, *names: str) -> Path:
+        """Commit the durable state and publish its model as the checkpoints ``names`` and ``last``."""
+        meta = meta_now(episodes)
+        source = durable.save(model, fit, episodes, meta.cpu_seconds or 0.0)
+        paths = [run.publish(source, job.role, name, meta) for name in (*names, LAST)]
+        return paths[0]
 
     stats = EpisodeStats(episodes=episodes)
     next_checkpoint = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
 
     def checkpoint(total: int) -> None:
         nonlocal next_checkpoint
-        while total >= next_checkpoint:
-            run.save(model, job.role, Run.episode_name(next_checkpoint), meta_now(total))
-            next_checkpoint += t.checkpoint_every
+        if total >= next_checkpoint:  # named after the last boundary it passed
+            commit(total, Run.episode_name(total // t.checkpoint_every * t.checkpoint_every))
+            next_checkpoint = (total // t.checkpoint_every + 1) * t.checkpoint_every
 
     stats.listeners.append(checkpoint)
     callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
@@ -264,12 +286,8 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
         curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)
         curriculum.apply_to(env, model.num_timesteps)  # the games SB3 starts before any callback runs
         callbacks.insert(0, curriculum)
-    fit = None
-    if belief is not None and belief.learned and env.buffer is not None:
-        fit = FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half)
+    if fit is not None:
         callbacks.append(fit)
-    if job.resume:
-        run.load_replay_buffer(model, job.role, fit)
     if t.eval_every:
         eval_opponent = DEFAULT_OPPONENT[job.role]
 
@@ -287,20 +305,42 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None) -> Path:
             model.learn(
                 remaining,
                 callback=CallbackList(callbacks),
-                reset_num_timesteps=not job.resume,
+                reset_num_timesteps=record is None,
                 tb_log_name=job.role,
             )
     except KeyboardInterrupt:
-        last = run.save(model, job.role, LAST, meta_now(stats.episodes))
-        run.save_replay_buffer(model, job.role, fit)
-        raise TrainingInterrupted(last) from None
+        raise TrainingInterrupted(commit(stats.episodes)) from None
     finally:
         logger = getattr(model, "_logger", None)
         if logger is not None:
             logger.close()
-    run.save(model, job.role, LAST, meta_now(stats.episodes))
-    run.save_replay_buffer(model, job.role, fit)
-    return run.save(model, job.role, FINAL, meta_now(stats.episodes))
+    return commit(stats.episodes, FINAL)
+
+
+def forget_evaluations_after(log: Path, steps: int) -> None:
+    """Drop the rows of an evaluation log past ``steps``: a run stopped after them resumes from before."""
+    if not log.is_file():
+        return
+    lines = log.read_text().splitlines(keepends=True)
+    def before(line: str) -> bool:  # a whole row (a kill can leave half of one) written at most at ``steps``
+        first = line.split(",", 1)[0]
+        return line.endswith("\n") and first.isdigit() and int(first) <= steps
+
+    kept = lines[:1] + [line for line in lines[1:] if before(line)]
+    if len(kept) < len(lines):
+        atomic_write_text(log, "".join(kept))
+
+
+def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable[[str], None]) -> None:
+    """A run with no durable state (it stopped before its first checkpoint): start it again from scratch,
+    in the same folder, after clearing what the stopped attempt left. A run written by an older pecli
+    (``last.zip`` and pickled buffers, no durable state) is refused: its progress would be lost."""
+    if run.checkpoint(job.role, LAST).is_file():
+        raise PecliError(f"run '{job.name}' was written by an older pecli (it has no {job.role}/{RESUME_DIR}/ state), "
+                         "which this one cannot resume; its checkpoints still play (with --trust): start a new run")
+    durable.clear()
+    (run.path / f"eval_{job.role}.csv").unlink(missing_ok=True)
+    report(f"run '{job.name}' stopped before its first checkpoint: nothing to resume, starting it over")
 
 
 def default_run_name(what: str, scenario: Scenario, seed: int) -> str:

@@ -1,0 +1,159 @@
+"""Checkpoints are data, not code: rebuild a checkpoint's networks from pecli's JSON and load its weights.
+
+A checkpoint is an SB3 zip beside pecli's metadata (:class:`~pecli.zoo.CheckpointMeta`). In the zip,
+``data`` is JSON in which SB3 pickles what JSON cannot hold (classes, spaces, schedules), and the
+``*.pth`` entries are state dicts. Unpickling runs whatever code a file's author put there, so pecli
+never deserialises ``data``: it reads the state dicts with ``torch.load(weights_only=True)`` and builds
+the networks from the metadata (algorithm, policy keyword arguments, belief) and the scenario.
+
+Checkpoints written before the metadata described the network (pecli 0.1.0 before this format) can
+only be rebuilt by unpickling; that needs an explicit ``pecli --trust`` (see :mod:`pecli.trust`).
+"""
+
+from __future__ import annotations
+
+import io
+import pickle
+import re
+import warnings
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.policies import BasePolicy
+
+from pecli.belief.model import features_dim
+from pecli.game import Game
+from pecli.rl.algorithms import get_algorithm
+from pecli.rl.belief import belief_observation_space
+from pecli.rl.extractors import BeliefExtractor
+from pecli.scenario import Scenario
+from pecli.trust import trusted, untrusted
+from pecli.zoo import CheckpointMeta, ZooError
+from wrappers.frozen_opponent import ACTION_SPACE, observation_space
+
+def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cpu") -> Any:
+    """What ``torch.save`` wrote to ``source`` (a file, or its bytes), if it is only tensors and plain
+    containers (``weights_only=True``); :class:`~pecli.trust.UntrustedFileError` for anything else, :class:`ZooError`
+    for a damaged file. ``name`` names it in messages."""
+    try:
+        with warnings.catch_warnings():  # torch warns about pickle protocols before refusing
+            warnings.simplefilter("ignore")
+            return th.load(io.BytesIO(source) if isinstance(source, bytes) else source, map_location=device,
+                           weights_only=True)
+    except OSError as exc:
+        raise ZooError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
+        if "weights_only" in str(exc) or isinstance(exc, pickle.UnpicklingError):
+            raise untrusted(name, "it holds pickled objects, not just tensors") from None
+        raise ZooError(f"{name}: damaged ({type(exc).__name__}: {exc})") from None
+
+
+def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The state dicts (``policy``, ``actor.optimizer``, ...) and the torch variables of an SB3 zip, read
+    with :func:`load_tensors`; nothing else in the zip is looked at. :class:`ZooError` if it cannot."""
+    params: dict[str, Any] = {}
+    variables = None
+    try:
+        with zipfile.ZipFile(path) as archive:
+            entries = {name: archive.read(name) for name in archive.namelist() if name.endswith(".pth")}
+    except zipfile.BadZipFile:
+        raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None
+    except OSError as exc:
+        raise ZooError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    for name, data in entries.items():
+        loaded = load_tensors(data, f"{path} ({name})", device)
+        if name in ("pytorch_variables.pth", "tensors.pth"):
+            variables = loaded
+        else:
+            params[name.removesuffix(".pth")] = loaded
+    if "policy" not in params:
+        raise ZooError(f"{path}: not a checkpoint (it has no policy weights)")
+    return params, variables
+
+
+def spaces_of(meta: CheckpointMeta, scenario: Scenario) -> tuple[spaces.Dict, spaces.Box]:
+    """The observation and action spaces a checkpoint's policy was built for, from its metadata."""
+    training = scenario.training.model_copy(update={
+        "frame_stack": meta.frame_stack, "history_length": meta.history_length, "history_stride": meta.history_stride,
+    })
+    with_belief = meta.belief != "none"
+    space = observation_space(Game(scenario, n=1), meta.role, training, history=with_belief)
+    if with_belief:
+        samples = (meta.belief_kwargs or {}).get("samples", scenario.training.belief_settings.samples)
+        space = belief_observation_space(space, features_dim(meta.belief, samples))
+    return space, ACTION_SPACE
+
+
+def build_policy(meta: CheckpointMeta, scenario: Scenario, device: str = "cpu") -> BasePolicy:
+    """A fresh policy of the shape ``meta`` describes (weights untrained)."""
+    algorithm = get_algorithm(meta.algo)
+    kwargs = dict(meta.policy_kwargs)
+    if meta.belief != "none":
+        if not meta.belief_kwargs:
+            raise ZooError(f"metadata of a '{meta.belief}' checkpoint without its belief_kwargs")
+        kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": meta.belief_kwargs})
+    observation, action = spaces_of(meta, scenario)
+    try:
+        return algorithm.policy(observation, action, lambda _: 0.0, **kwargs).to(device)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ZooError(f"its metadata describes no network pecli can build ({type(exc).__name__}: {exc})") from None
+
+
+_SIZE_MISMATCH = re.compile(r"size mismatch for ([\w.]+): copying a param with shape torch\.Size\((\[[^\]]*\])\) "
+                            r"from checkpoint, the shape in current model is torch\.Size\((\[[^\]]*\])\)")
+
+
+def _mismatch(exc: RuntimeError) -> str:
+    """The first difference between weights and metadata, from torch's long ``load_state_dict`` message."""
+    text = str(exc)
+    if m := _SIZE_MISMATCH.search(text):
+        return f"{m[1]} has shape {m[2]} in the weights but {m[3]} by the metadata"
+    if m := re.search(r'(Missing key\(s\)|Unexpected key\(s\)) in state_dict: ("[^"]+")', text):
+        return f"{m[1].lower()} {m[2]}"
+    return text.splitlines()[0][:200]
+
+
+def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, device: str = "cpu") -> BasePolicy:
+    """The policy of the checkpoint at ``path``, rebuilt from ``meta`` and its weights; unpickles nothing
+    unless the checkpoint predates pecli's network metadata and the user trusts it."""
+    if not meta.policy_kwargs:
+        if not trusted():
+            raise untrusted(path, "it was written before pecli described networks in its metadata, "
+                                           "so only unpickling can rebuild it")
+        try:
+            return get_algorithm(meta.algo).cls.load(path, device=device).policy
+        except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
+            raise ZooError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
+    params, _ = read_weights(path, device)
+    try:
+        policy = build_policy(meta, scenario, device)
+    except ZooError as exc:
+        raise ZooError(f"{path}: {exc}") from None
+    try:
+        policy.load_state_dict(params["policy"], strict=True)
+    except RuntimeError as exc:
+        raise ZooError(f"{path}: its metadata ({Path(path).with_suffix('.json').name}) does not describe its network: "
+                       f"{_mismatch(exc)}") from None
+    policy.set_training_mode(False)
+    return policy
+
+
+def restore_model(model: BaseAlgorithm, path: str | Path) -> None:
+    """Put the weights and optimiser states of the checkpoint at ``path`` into ``model``, a model built
+    like the one that wrote it (``make_model`` from the run's config); :class:`ZooError` if they differ."""
+    params, variables = read_weights(path, str(model.device))
+    try:
+        model.set_parameters(params, exact_match=True, device=model.device)
+    except (RuntimeError, ValueError, KeyError) as exc:
+        raise ZooError(f"{path}: does not fit the run's model: {_mismatch(exc) if isinstance(exc, RuntimeError) else exc}"
+                       ) from None
+    for name in model._get_torch_save_params()[1]:  # e.g. SAC's log_ent_coef
+        if variables and variables.get(name) is not None:
+            target = model
+            for part in name.split("."):
+                target = getattr(target, part)
+            target.data = variables[name].data.to(model.device)

@@ -20,7 +20,7 @@ from pecli.hj.solver import solve_with_capture_steps
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.base import HeuristicPolicy
-from pecli.policies.hj import INPUTS, HJPolicy
+from pecli.policies.hj import INPUTS, HJPolicy, choose
 from pecli.scenario import Scenario, load_scenario
 
 runner = CliRunner()
@@ -318,6 +318,27 @@ def test_an_estimate_the_own_sensor_rules_out_moves_out_of_range(arena: Solution
     evader = HJPolicy(point_mass, "evader", arena)
     actions = evader.act(obs["evader"])
     assert np.array_equal(actions[0], [1.0, 1.0])  # the centre is out of its range: it draws away from it
+
+
+def test_the_value_rates_only_games_in_which_both_players_see_each_other(arena: Solution,
+                                                                        point_mass: Scenario) -> None:
+    """A pursuer that sees 30 m against an evader that sees 3.75 m: beyond 3.75 m the evader plays blind, the
+    value's full-information game is not being played, and the distance decides (the pursuer closes in)."""
+    far = point_mass.pursuer.sensor.model_copy(update={"range": 30.0})
+    scenario = point_mass.model_copy(update={"pursuer": point_mass.pursuer.model_copy(update={"sensor": far})})
+    states = np.array([[0.0, 0.0, 0.0, 0.0, 4.5, 1.0, 0.0, 0.0],  # 4.6 m apart: only the pursuer sees
+                       [0.0, 0.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0]])  # 2.2 m apart: both see
+    obs = Game(scenario, n=2).set_state(states)
+    pursuer = HJPolicy(scenario, "pursuer", arena)
+    pursuer.reset(2)
+    view = pursuer.codec.decode(obs["pursuer"])
+    assert view.seen.all() and list(pursuer._mutual(view)) == [False, True]
+    scores, distances = pursuer.outcomes(states[:, :4].T, states[:, 4:].T)
+    actions = pursuer.act(obs["pursuer"])
+    assert np.array_equal(actions[0], INPUTS[np.argmin(distances[0].mean(axis=1))])  # the distance alone
+    assert np.array_equal(actions[1], INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))[1]])
+    evader = HJPolicy(scenario, "evader", arena)  # it sees the pursuer at 2.2 m only, and is seen: it rates that
+    assert list(evader._mutual(evader.codec.decode(obs["evader"]))) == [False, True]
 
 
 def test_empty_and_non_finite_solutions_are_refused_in_one_line(arena: Solution, point_mass: Scenario,

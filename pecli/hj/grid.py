@@ -57,7 +57,7 @@ class Axis:
 
 @dataclass(frozen=True)
 class Grid:
-    """A product grid: the x half's axes, then the y half's (velocities first, the position last in each half)."""
+    """A product grid: the x half's axes, then the y half's (velocities first, positions last in each half)."""
 
     model: Model
     x_axes: tuple[Axis, ...]
@@ -141,14 +141,15 @@ class Grid:
             lower = np.minimum(np.floor(u), axis.n - 2).astype(np.int64)  # (n, a)
             t = u - lower
             first = lower.min(axis=1)  # (n,)
-            span = int((lower - first[:, None]).max()) + 2
+            span = int((lower - first[:, None]).max(initial=0)) + 2
             local = np.zeros((n, a, span))
             at = lower - first[:, None]
             np.put_along_axis(local, at[:, :, None], (1.0 - t)[:, :, None], axis=2)
             np.put_along_axis(local, at[:, :, None] + 1, t[:, :, None], axis=2)
             index = np.minimum(first[:, None] + np.arange(span), axis.n - 1)  # (n, span)
-            nodes = (nodes[:, :, None] * axis.n + index[:, None, :]).reshape(n, -1)
-            weights = (weights[:, :, :, None] * local[:, :, None, :]).reshape(n, a, -1)
+            size = nodes.shape[1] * span
+            nodes = (nodes[:, :, None] * axis.n + index[:, None, :]).reshape(n, size)
+            weights = (weights[:, :, :, None] * local[:, :, None, :]).reshape(n, a, size)
         return nodes, weights
 
 

@@ -1,21 +1,27 @@
-"""Hamilton–Jacobi players: each step, the input whose outcome the solved value function rates best.
+"""Hamilton–Jacobi players: each step, the input whose outcomes the solved value function rates best.
 
-A solution (:mod:`pecli.hj`) rates every state with a **score**: the fewest steps in which the
-pursuer forces a capture, or, where it cannot within the solution's horizon, the horizon plus one
-plus the closest approach (m) it can force. Each step a player plays the game's own step
+A solution (:mod:`pecli.hj`) rates every state with a **score**
+(:meth:`~pecli.hj.solution.Solution.scores`): the fewest steps in which the pursuer forces a
+capture, or, where it cannot within the solution's horizon, the horizon plus one plus the closest
+approach (m) it can force. Each step a player plays the game's own step
 (:class:`~pecli.game.dynamics.PointMassDynamics`, walls included) for its nine inputs
 ``{-1, 0, 1}²`` against the opponent's nine, reads the score of each of the 81 outcomes (an outcome
 that is a capture scores -1), averages it over the opponent's inputs, and takes the input with the
 lowest average (the pursuer) or the highest (the evader). Averages within :data:`TIE` of the best
-are ties, which the average distance after the step decides: the pursuer closes in, the evader
-draws away. That is also the whole rule where the score is flat, for example where the value
-cannot tell the inputs apart in the open plane of a relative model.
+are ties, which the average distance one step after the outcome decides: the pursuer closes in,
+the evader draws away. That is also the whole rule where the score is flat, for example where
+the value cannot tell the inputs apart in the open plane of a relative model.
 
 The state needs the opponent's position and velocity. While the opponent is seen they come from
 the observation. When it is not, the policy uses an estimate: the last sighting moved at its last
 velocity (stopping at walls as the game does), or, with a belief checkpoint, the position the
 belief's mixture mean gives (the paper's choice, "BiMDN weighted mean") with the last sighting's
 velocity. Before the first sighting, without a belief, the estimate is the arena's centre, at rest.
+An estimate within the player's own sensing range is moved out to the range's edge (the player
+would see the opponent there). The value is that of the full-information game, so it rates
+outcomes only while both players see each other; otherwise (an estimate, or an opponent that
+cannot see this player) only the distance decides. See ``docs/hj.md`` for the measurements
+behind each rule.
 """
 
 from __future__ import annotations
@@ -109,6 +115,11 @@ class HJPolicy(HeuristicPolicy):
         if self.belief is not None:
             self.belief.reset(n, mask, seed)
 
+    def end(self, mask: np.ndarray) -> None:
+        """The games in ``mask`` have ended: a belief's network skips them (the policy itself is cheap)."""
+        if self.belief is not None:
+            self.belief.end(mask)
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs)
         if self.belief is not None and obs.ndim == 2 and obs.shape[1] == self.codec.dim:
@@ -124,7 +135,7 @@ class HJPolicy(HeuristicPolicy):
         opp = np.concatenate([opp_pos, opp_vel], axis=1).T
         pursuer, evader = (own, opp) if self.role == "pursuer" else (opp, own)
         scores, distances = self.outcomes(pursuer, evader)
-        scores[~view.seen] = 0.0  # an estimate is no state to rate: only the distance decides (see the module)
+        scores[~self._mutual(view)] = 0.0  # only the distance decides (see the module)
         if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
             return INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))]
         return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
@@ -160,6 +171,18 @@ class HJPolicy(HeuristicPolicy):
         scores[_pair_norm(gap) <= self.scenario.capture_distance] = CAPTURED
         order = (0, 1, 3, 2, 4)  # (n, px, py, ex, ey): pursuer input 3 px + py, evader input 3 ex + ey
         return scores.transpose(order).reshape(n, 9, 9), _pair_norm(ahead).transpose(order).reshape(n, 9, 9)
+
+    def _mutual(self, view: Decoded) -> np.ndarray:
+        """``(n,)`` bool: the games in which both players see each other, the full-information game the value solves.
+
+        This player's sensor says whether it sees the opponent; the opponent's (a disk, the opponent
+        being a point mass) whether it can see this player, from the seen opponent's distance.
+        Where this player sees nothing the state is an estimate; where only this player sees, the
+        opponent plays blind. Either way the value's assumption fails and only the distance decides.
+        """
+        gap = view.opp_pos - view.own_pos
+        in_range = np.hypot(gap[:, 0], gap[:, 1]) <= self.opponent.params.sensor.range + 1e-3  # float32 slack
+        return view.seen & in_range
 
     def _estimate(self, view: Decoded) -> tuple[np.ndarray, np.ndarray]:
         """The opponent's position and velocity ``(n, 2)`` each: observed, or estimated where unseen."""

@@ -15,7 +15,7 @@ player decides (every ``frame_skip``-th) are timed:
 ``onnx graph`` :meth:`pecli.runtime.ExportedModel.run` alone on the same inputs
 ``torch``      :meth:`pecli.policies.learned.LearnedPolicy.act`: the checkpoint in eager PyTorch, as it
                plays in simulation (normalised observations, its own frame stack and window)
-``torch net``  the checkpoint's ``actor.mu(actor.features_extractor(...))`` alone, under ``no_grad``
+``torch net``  the checkpoint's ``deterministic_actor(actor)(actor.features_extractor(...))`` alone, under ``no_grad``
 
 It prints p50 and p99 in milliseconds, the speed-up of the runtime over the torch policy, and the
 sizes of the ``.onnx`` file and of the checkpoint (which also holds the critic and optimiser).
@@ -83,6 +83,7 @@ def timed(call, ticks: int, frame_skip: int) -> list[float]:
 def measure(kind: str, config: str, decisions: int, rounds: int, zoo: Path) -> dict[str, object]:
     from pecli.game.si import SILayout
     from pecli.policies import resolve_policy
+    from pecli.rl.algorithms import deterministic_actor
     from pecli.runtime import Controller
     from pecli.scenario import load_scenario
 
@@ -115,9 +116,11 @@ def measure(kind: str, config: str, decisions: int, rounds: int, zoo: Path) -> d
         stacks, windows = learned.memory(1)
         batch = {"obs": th.as_tensor(stacks)} | ({"history": th.as_tensor(windows)} if windows is not None else {})
 
+        act = deterministic_actor(learned.actor)
+
         def net(_: int) -> None:
             with th.no_grad():
-                learned.actor.mu(learned.actor.features_extractor(batch))
+                act(learned.actor.features_extractor(batch))
 
         samples["torch net"] += timed(net, decisions, 1)
     return {

@@ -17,15 +17,24 @@ greedy evader (200 batched episodes) every ``--eval-every`` transitions, until e
 ``--resume`` continues stopped runs until they have used ``--minutes`` in all. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
 takes each seed's best evaluation within each budget of ``--at`` (default 10 and 30 CPU-minutes),
-prints their medians, and draws ``docs/learning_curves_<belief>.png``. ``--belief`` picks the
+prints their medians, and draws ``docs/learning_curves_<belief>.png`` (``learning_curves_<config>_<belief>.png``
+for another config than paper). ``--belief`` picks the
 actor's belief (runs are named ``<config>-<belief>-s<seed>``).
+
+``selfplay`` runs ``pecli selfplay`` for each config of ``--configs`` (default: tuned and paper) and each seed
+until it has used ``--minutes`` of CPU time (or finished its rounds), stopping it with SIGTERM (finished turns
+are kept; ``--resume`` continues them to the same cap), then plays each pair of configs' final
+checkpoints against each other, ``--episodes`` games: the first config's pursuer against the second's
+evader and vice versa.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -159,20 +168,81 @@ def report(args: argparse.Namespace) -> None:
         for minutes in at:
             if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
                 at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
-    ax.axhline(0.9, color="0.6", ls="--", lw=0.8)
+    ax.axhline(0.95, color="0.6", ls="--", lw=0.8)
     ax.set_xlabel("CPU minutes (one torch thread)")
     ax.set_ylabel("capture rate vs greedy (200 episodes)")
     ax.set_ylim(0, 1)
     ax.set_title(f"pecli train pursuer, {args.config}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = ROOT / "docs" / f"learning_curves_{args.belief}.png"
+    out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper"
+                                       else f"learning_curves_{args.config}_{args.belief}.png")
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
     for minutes, values in at.items():
         shown = ", ".join(f"{v:.2f}" for v in values) or "no run got that far"
         median = f"{statistics.median(values):.2f}" if values else "-"
         print(f"best capture rate within {minutes:g} CPU-min: median {median} ({shown})")
+
+
+SELFPLAY = Path(os.environ.get("PECLI_BENCH_SELFPLAY", ROOT / "runs" / "bench_train_selfplay"))
+
+
+def _process_cpu_seconds(pid: int) -> float:
+    """CPU time (user + system) of a running process, from /proc (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _turns(run: Path) -> list[dict]:
+    state = run / "selfplay.json"
+    return json.loads(state.read_text())["turns"] if state.is_file() else []
+
+
+def selfplay(args: argparse.Namespace) -> None:
+    """Self-play per config and seed to a CPU cap, then the configs' final players against each other."""
+    SELFPLAY.mkdir(parents=True, exist_ok=True)
+    for seed in args.seeds:
+        for config in args.configs:
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
+            before = sum(t["cpu_seconds"] for t in _turns(run))  # earlier processes' finished turns
+            if before >= 60 * args.minutes or (run / "done").exists():
+                continue
+            command = [sys.executable, "-m", "pecli", "selfplay", "--zoo", str(SELFPLAY), "--name", run.name, "-q"]
+            command += ["--resume"] if (run / "selfplay.json").exists() else ["-c", config, "--seed", str(seed)]
+            print("started:", " ".join(command[1:]), flush=True)
+            process = subprocess.Popen(command, cwd=ROOT)
+            while process.poll() is None:
+                time.sleep(5)
+                if process.poll() is None and before + _process_cpu_seconds(process.pid) >= 60 * args.minutes:
+                    process.send_signal(signal.SIGTERM)  # keeps the finished turns
+                    process.wait()
+            if process.returncode == 0:
+                (run / "done").touch()  # played all its rounds within the cap
+            used = sum(t["cpu_seconds"] for t in _turns(run))
+            print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
+    print(f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
+          f"{args.configs[0]} evader | rounds |")
+    print("| ---: | ---: | ---: | --- |")
+    for seed in args.seeds:
+        final = {}
+        for config in args.configs[:2]:
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
+            final[config] = {t["role"]: run / t["checkpoint"] for t in _turns(run)}
+        if any(set(f) != {"pursuer", "evader"} for f in final.values()):
+            print(f"| {seed} | - | - | a run has no finished round yet |")
+            continue
+        a, b = args.configs[:2]
+        rates = [_capture_rate(final[x]["pursuer"], final[y]["evader"], args.episodes, seed) for x, y in ((a, b), (b, a))]
+        rounds = " / ".join(str(len(_turns(SELFPLAY / f"{Path(c).stem}-s{seed}")) // 2) for c in (a, b))
+        print(f"| {seed} | {rates[0]:.3f} | {rates[1]:.3f} | {rounds} |", flush=True)
+
+
+def _capture_rate(pursuer: Path, evader: Path, episodes: int, seed: int) -> float:
+    command = [sys.executable, "-m", "pecli", "play", "--pursuer", str(pursuer), "--evader", str(evader),
+               "--episodes", str(episodes), "--seed", str(10_000 + seed), "--json"]
+    output = subprocess.run(command, cwd=ROOT, check=True, capture_output=True, text=True).stdout
+    return float(json.loads(output)["capture_rate"])
 
 
 def main() -> None:
@@ -198,8 +268,14 @@ def main() -> None:
     r.add_argument("--config", default="paper")
     r.add_argument("--belief", default="none")
     r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
+    r.add_argument("--out", type=Path, default=None, help="the plot (default: docs/learning_curves_...png)")
+    p = sub.add_parser("selfplay")
+    p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
+    p.add_argument("--episodes", type=int, default=500)
     args = parser.parse_args()
-    {"speed": speed, "curves": curves, "report": report}[args.step](args)
+    {"speed": speed, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
 
 
 if __name__ == "__main__":

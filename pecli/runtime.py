@@ -242,7 +242,8 @@ class Controller:
 
         A car's command is (steering velocity rad/s, acceleration m/s^2); a point mass's
         (a_x, a_y) m/s^2 in the world frame. Between decisions (every ``frame_skip`` ticks) the
-        last command is held, as in training.
+        last command is held, as in training. A model that returns NaN or infinity raises
+        :class:`~pecli.errors.ExportError` instead: a robot must stop rather than send it.
         """
         m = self.model
         row = self.row(own, opponent, seen, time)
@@ -253,7 +254,12 @@ class Controller:
         if self.ticks % m.frame_skip == 0:
             self.stack = np.concatenate([self.stack[1:], row[None]])
             self.outputs = self._run()
-            self.command = self.outputs["command"][0].copy()
+            command = self.outputs["command"][0]
+            if not np.isfinite(command).all():
+                raise ExportError(f"the model returned the command {command.tolist()} at tick {self.ticks}: "
+                                  "a NaN or infinite command is never sent to the motors (is the model damaged? "
+                                  "`pecli export check` tells)")
+            self.command = command.copy()
         self.ticks += 1
         return self.command.copy()
 

@@ -7,17 +7,23 @@
 Each pairing plays ``episodes`` games per seed as one batch (:func:`pecli.match.play_match`). Game
 ``i`` under seed ``s`` starts from the same state in every pairing, so the comparison is paired.
 Finished pairings are cached as JSON in ``out/pairings/``: an interrupted tournament resumes,
-and a grown zoo only plays its new pairings.
+and a grown zoo only plays its new pairings. One tournament writes ``out`` at a time (a folder
+lock, :mod:`pecli.locks`), and worker processes end with their driver, whatever signal ends it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import random
-import zipfile
-from collections.abc import Callable, Iterable, Sequence
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
@@ -26,13 +32,14 @@ from typing import Any
 from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json, file_digest
+from pecli.locks import locked
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, RESUME_DIR, ZooError, read_metadata
+from pecli.zoo import LAST, RESUME_DIR, ZooError, checkpoint_problem, read_metadata
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
@@ -82,8 +89,8 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
     except ZooError as exc:
         skipped.append(str(exc))
         return None
-    if not zipfile.is_zipfile(path):
-        skipped.append(f"{path}: damaged checkpoint (truncated or not a zip)")
+    if problem := checkpoint_problem(path):
+        skipped.append(f"{path}: {problem}")
         return None
     if meta.scenario_hash != scenario.fingerprint():
         skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")
@@ -251,6 +258,7 @@ def play_pairing(scenario: Scenario, pursuer: Player, evader: Player, episodes: 
     captured, times = [], []
     p = resolve_policy(pursuer.spec, "pursuer", scenario)
     e = resolve_policy(evader.spec, "evader", scenario)
+    _one_torch_thread()
     for seed in seeds:  # play_match reseeds both policies from the seed
         result, _ = play_match(scenario, p, e, episodes=episodes, seed=seed)
         captured.append(result.captured)
@@ -277,10 +285,59 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
         return None
 
 
-def _worker_init() -> None:
-    import torch
+def _one_torch_thread() -> None:
+    """Run torch on one thread if a policy loaded it (small batched networks gain nothing from more)."""
+    if (torch := sys.modules.get("torch")) is not None:
+        torch.set_num_threads(1)
 
-    torch.set_num_threads(1)
+
+def _worker_init(driver: int) -> None:
+    """Make a worker process end with its ``driver`` (PID), whatever signal ends the driver.
+
+    On Linux the kernel sends the worker SIGKILL when its parent dies (``PR_SET_PDEATHSIG``); elsewhere
+    a thread polls the parent. Workers ignore SIGINT: the driver handles Ctrl-C and stops them.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    else:
+        threading.Thread(target=_watch_parent, args=(driver,), daemon=True).start()
+    if os.getppid() != driver:  # the driver died before the watch was set
+        os._exit(1)
+
+
+def _watch_parent(driver: int) -> None:
+    while os.getppid() == driver:
+        time.sleep(0.5)
+    os._exit(1)
+
+
+@contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A pool of ``workers`` spawned processes that never outlive this one.
+
+    Each worker ends when this process dies, even by SIGKILL (:func:`_worker_init`). An exception in
+    the ``with`` block (Ctrl-C, SIGTERM turned into ``KeyboardInterrupt``, an error) stops the workers
+    at once instead of waiting for their pairings; a normal exit waits for them.
+    """
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                               initargs=(os.getpid(),))
+    try:
+        yield pool
+    except BaseException:
+        processes = list(getattr(pool, "_processes", None) or {})  # pids; Python 3.14 has terminate_workers()
+        pool.shutdown(wait=False, cancel_futures=True)
+        for pid in processes:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        pool.shutdown(wait=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def _play_job(job: tuple[Scenario, Player, Player, int, list[int]]) -> PairingResult:
@@ -353,48 +410,52 @@ def run_tournament(
     workers: int = 1,
     on_result: Callable[[PairingResult, bool], None] | None = None,
 ) -> TournamentResults:
-    """Play every pairing not yet cached in ``out/pairings``; ``on_result(result, was_cached)`` reports each."""
+    """Play every pairing not yet cached in ``out/pairings``; ``on_result(result, was_cached)`` reports each.
+
+    ``out`` is locked while the tournament runs: :class:`~pecli.locks.FolderLocked` if another process
+    is writing it.
+    """
     cache = out / "pairings"
     cache.mkdir(parents=True, exist_ok=True)
-    results: dict[str, PairingResult] = {}
-    todo: list[tuple[str, tuple]] = []
-    for pursuer, evader in pairings:
-        key = pairing_key(scenario, pursuer, evader, episodes, seeds)
-        result = _cached(cache / f"{key}.json", pursuer, evader)
-        if result is not None:
+    with locked(out, "tournament output"):
+        results: dict[str, PairingResult] = {}
+        todo: list[tuple[str, tuple]] = []
+        for pursuer, evader in pairings:
+            key = pairing_key(scenario, pursuer, evader, episodes, seeds)
+            result = _cached(cache / f"{key}.json", pursuer, evader)
+            if result is not None:
+                results[key] = result
+                if on_result is not None:
+                    on_result(result, True)
+            else:
+                todo.append((key, (scenario, pursuer, evader, episodes, list(seeds))))
+
+        def finish(key: str, result: PairingResult) -> None:
+            atomic_write_json(cache / f"{key}.json", asdict(result))
             results[key] = result
             if on_result is not None:
-                on_result(result, True)
+                on_result(result, False)
+
+        failures: list[str] = []
+        if workers > 1 and len(todo) > 1:
+            with worker_pool(workers) as pool:
+                futures = {pool.submit(_play_job, job): key for key, job in todo}
+                for future in as_completed(futures):
+                    try:
+                        finish(futures[future], future.result())
+                    except PecliError as exc:  # keep playing the others; each finished pairing is cached
+                        failures.append(str(exc))
         else:
-            todo.append((key, (scenario, pursuer, evader, episodes, list(seeds))))
-
-    def finish(key: str, result: PairingResult) -> None:
-        atomic_write_json(cache / f"{key}.json", asdict(result))
-        results[key] = result
-        if on_result is not None:
-            on_result(result, False)
-
-    failures: list[str] = []
-    if workers > 1 and len(todo) > 1:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init) as pool:
-            futures = {pool.submit(_play_job, job): key for key, job in todo}
-            for future in as_completed(futures):
+            for key, job in todo:
                 try:
-                    finish(futures[future], future.result())
-                except PecliError as exc:  # keep playing the others; each finished pairing is cached
+                    finish(key, _play_job(job))
+                except PecliError as exc:
                     failures.append(str(exc))
-    else:
-        _worker_init()
-        for key, job in todo:
-            try:
-                finish(key, _play_job(job))
-            except PecliError as exc:
-                failures.append(str(exc))
-    if failures:
-        more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
-        raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")
-    ordered = [results[pairing_key(scenario, p, e, episodes, seeds)] for p, e in pairings]
-    return TournamentResults(
-        scenario=scenario, players=players, pairings=ordered, ratings=rate(players, ordered),
-        episodes=episodes, seeds=list(seeds),
-    )
+        if failures:
+            more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
+            raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")
+        ordered = [results[pairing_key(scenario, p, e, episodes, seeds)] for p, e in pairings]
+        return TournamentResults(
+            scenario=scenario, players=players, pairings=ordered, ratings=rate(players, ordered),
+            episodes=episodes, seeds=list(seeds),
+        )

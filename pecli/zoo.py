@@ -15,7 +15,9 @@ Layout of one run::
             resume/          the durable state: model, optimisers, buffers (pecli.rl.durable)
         run.json             what the run is: command, role, opponent, seed (what a resume keeps)
 
-Every file is written atomically.
+Every file is written atomically. A run's name is one folder name (:func:`check_run_name`), and a
+process that creates or opens a run to write it holds the run folder's lock (:mod:`pecli.locks`)
+until it closes the run or ends.
 """
 
 from __future__ import annotations
@@ -23,10 +25,12 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import shlex
 import shutil
 import sys
 import tempfile
+import weakref
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -37,6 +41,7 @@ import yaml
 from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text
+from pecli.locks import acquire, release
 from pecli.roles import Role
 from pecli.scenario import Scenario, scenario_from_dict
 
@@ -122,6 +127,32 @@ def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
         raise ZooError(f"{path}: damaged metadata ({exc})") from None
 
 
+CHECKPOINT_ENTRIES = ("data", "policy.pth")  # what every checkpoint zip (SB3's save) holds
+
+
+def checkpoint_problem(checkpoint: Path, thorough: bool = False) -> str:
+    """Why ``checkpoint`` is not a readable checkpoint file, or ``""``: empty, not a zip (truncated or
+    damaged), a zip without a checkpoint's entries; with ``thorough``, also an entry that fails its CRC
+    check (which reads the whole file)."""
+    import zipfile
+    import zlib
+
+    try:
+        if checkpoint.stat().st_size == 0:
+            return "empty file"
+        with zipfile.ZipFile(checkpoint) as archive:
+            missing = [name for name in CHECKPOINT_ENTRIES if name not in archive.namelist()]
+            if missing:
+                return f"not a pecli checkpoint (no '{missing[0]}' in the zip: truncated, or another zip)"
+            if thorough and (bad := archive.testzip()) is not None:
+                return f"damaged zip ('{bad}' fails its CRC check)"
+    except (zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError, ValueError):
+        return "damaged zip (truncated or not a zip)"
+    except OSError as exc:
+        return f"unreadable ({exc.strerror or exc})"
+    return ""
+
+
 def versions() -> dict[str, str]:
     """Versions of what a checkpoint depends on."""
     import numpy
@@ -142,16 +173,47 @@ def command_line() -> str:
     return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])
 
 
+_RUN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}")
+
+
+def check_run_name(name: str) -> str:
+    """``name`` if it is one folder name of letters, digits, ``-``, ``_`` and ``.`` (not starting with
+    ``.``, at most 128 characters); else :class:`ZooError`: a run stays inside its zoo."""
+    if not isinstance(name, str) or not _RUN_NAME.fullmatch(name):
+        raise ZooError(f"run name {name!r} is not allowed: use one folder name of letters, digits, '-', '_' "
+                       "and '.' (not starting with '.', at most 128 characters)")
+    return name
+
+
+def safe_run_name(text: str) -> str:
+    """``text`` as a run name: every other character becomes ``-`` (for names made from a scenario's name)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).lstrip(".-")[:128] or "run"
+
+
 class Run:
-    """One training run in a zoo: ``zoo/<name>/``."""
+    """One training run in a zoo: ``zoo/<name>/``.
+
+    :meth:`create` and :meth:`open` take the run folder's lock for writing; it is released by
+    :meth:`close`, when the object is garbage-collected, or when the process ends.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.name = path.name
 
+    def _lock(self) -> None:
+        acquire(self.path, f"run '{self.name}'")
+        self._release = weakref.finalize(self, release, self.path)
+
+    def close(self) -> None:
+        """Release the run folder's lock (taken by :meth:`create` or :meth:`open`)."""
+        if hasattr(self, "_release"):
+            self._release()
+
     @staticmethod
     def check_new(zoo: Path, name: str) -> None:
-        """:class:`ZooError` unless ``zoo/name`` is free for a new run."""
+        """:class:`ZooError` unless ``name`` is a valid run name and ``zoo/name`` is free for a new run."""
+        check_run_name(name)
         if (zoo / name).exists():
             raise ZooError(f"run '{name}' already exists in {zoo}: pass --resume to continue it, or another --name")
 
@@ -176,14 +238,19 @@ class Run:
         except OSError as exc:
             shutil.rmtree(staging, ignore_errors=True)
             raise ZooError(f"cannot create the run folder {path}: {exc.strerror}") from None
-        return cls(path)
+        run = cls(path)
+        run._lock()
+        return run
 
     @classmethod
     def open(cls, zoo: Path, name: str) -> Run:
-        path = zoo / name
+        """The run ``zoo/name``, locked for writing; :class:`ZooError` if there is none."""
+        path = zoo / check_run_name(name)
         if not (path / "config.yaml").is_file():
             raise ZooError(f"no run '{name}' in {zoo} to resume")
-        return cls(path)
+        run = cls(path)
+        run._lock()
+        return run
 
     def scenario(self) -> Scenario:
         """The resolved scenario the run was started with."""
@@ -273,8 +340,6 @@ def runs_in(zoo: Path) -> list[Run]:
 
 def checkpoints_in(run: Run) -> list[CheckpointEntry]:
     """The checkpoints of a run, each with its metadata; damaged ones say why."""
-    import zipfile
-
     entries = []
     for path in sorted(run.path.glob("*/*.zip")):
         if not metadata_path(path).is_file():
@@ -285,8 +350,7 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
         except ZooError:
             entries.append(CheckpointEntry(path, None, "damaged metadata"))
             continue
-        problem = "" if zipfile.is_zipfile(path) else "damaged zip"
-        entries.append(CheckpointEntry(path, meta, problem))
+        entries.append(CheckpointEntry(path, meta, checkpoint_problem(path)))
     return entries
 
 

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import pytest
+import torch as th
 
 from pecli.scenario import Scenario, builtin_names, load_scenario
 
-BUILTINS = ["paper", "car_vs_car", "point_mass", "robots", "quick"]
+BUILTINS = ["paper", "car_vs_car", "point_mass", "robots", "quick", "tuned"]
 
 
 @pytest.fixture(scope="session")
@@ -20,10 +21,22 @@ def quick() -> Scenario:
 
 
 def all_scenarios() -> list[Scenario]:
-    """Every built-in scenario in both observation frames."""
+    """Every built-in game in both observation frames (a config that only trains differently, such as
+    tuned, is the game of another)."""
     assert sorted(builtin_names()) == sorted(BUILTINS)
-    out = []
+    out, games = [], set()
     for name in BUILTINS:
         s = load_scenario(name)
+        if s.fingerprint() in games:
+            continue
+        games.add(s.fingerprint())
         out += [s, s.model_copy(update={"observation_frame": "world" if s.observation_frame == "own" else "own"})]
     return out
+
+
+@pytest.fixture
+def keep_torch_threads():
+    """Training sets torch's thread count for the whole process; a test using this restores it after."""
+    threads = th.get_num_threads()
+    yield
+    th.set_num_threads(threads)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -426,3 +427,87 @@ def test_exported_policies_are_policies(exports, quick: Scenario) -> None:
     actions = policy.act(np.zeros((3, 11), dtype=np.float32))
     assert actions.shape == (3, 2) and np.all(np.abs(actions) <= 1)
     np.testing.assert_allclose(policy.command, actions * policy.model.limits, rtol=1e-6)
+
+
+# -- never export or command a broken policy (issue 21) ---------------------------------------------------------------
+def poisoned_copy(checkpoint: Path, name: str) -> Path:
+    """A copy of ``checkpoint`` beside it whose actor's first layer is NaN (what a diverged training leaves)."""
+    import io
+    import shutil
+    import zipfile
+
+    out = checkpoint.with_name(f"{name}.zip")
+    with zipfile.ZipFile(checkpoint) as source, zipfile.ZipFile(out, "w") as copy:
+        for entry in source.infolist():
+            data = source.read(entry)
+            if entry.filename == "policy.pth":
+                weights = th.load(io.BytesIO(data), weights_only=True)
+                weights["actor.mu.0.weight"].fill_(math.nan)
+                buffer = io.BytesIO()
+                th.save(weights, buffer)
+                data = buffer.getvalue()
+            copy.writestr(entry, data)
+    shutil.copy(checkpoint.with_suffix(".json"), out.with_suffix(".json"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def broken(exports, quick: Scenario) -> dict:
+    """The 'none' pursuer's checkpoint, a copy of it with NaN weights in its run, and that network as an ONNX graph."""
+    from pecli.export.exporter import onnx_bytes
+    from pecli.export.sidecar import build_sidecar
+    from pecli.policies.learned import LearnedPolicy
+
+    checkpoint, _ = exports["none"]
+    diverged = poisoned_copy(checkpoint, "diverged")
+    learned = LearnedPolicy.load(diverged, "pursuer", quick)
+    assert not th.isfinite(learned.actor.mu[0].weight).all()
+    graph, data = onnx_bytes(learned, SILayout(quick, "pursuer"), 17)
+    sidecar = build_sidecar(graph, quick, learned.meta, checkpoint, 17, learned.draws)
+    return {"checkpoint": checkpoint, "diverged": diverged, "model": ExportedModel.from_bytes(data, sidecar)}
+
+
+def test_a_network_with_nan_weights_is_not_exported(broken) -> None:
+    diverged = broken["diverged"]
+    result = runner.invoke(app, ["export", "onnx", str(diverged), "-n", "1"])
+    assert result.exit_code == 1 and "NaN or infinite" in result.output and "not exported" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not diverged.with_suffix(".onnx").exists()
+
+
+def test_parity_fails_when_either_side_is_not_finite(broken, quick: Scenario) -> None:
+    """NaN - NaN is NaN and max(0.0, NaN) is 0.0: a NaN export used to pass with a difference of 0."""
+    from pecli.export.check import check_parity
+
+    healthy = resolve_policy(str(broken["checkpoint"]), "pursuer", quick)
+    report = check_parity(ExportedPolicy(broken["model"], quick), healthy, quick, episodes=2)
+    assert not report.passed and report.non_finite > 0 and "NaN or infinite" in report.failure()
+    assert math.isfinite(report.max_action_difference) and json.dumps(report.to_dict(), allow_nan=False)
+
+
+def test_the_runtime_never_returns_a_nan_command(broken) -> None:
+    controller = Controller(broken["model"], seed=0)
+    with pytest.raises(ExportError, match="never sent to the motors"):
+        controller.step(np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (lambda s: s["sensor"].update(fov_rad=1.0), r"sensor\.fov_rad is 1\.0, not 2\.09"),
+        (lambda s: s.update(command_limits=[9.0, 2.0]), r"command_limits\[0\] is 9\.0, not 3\.2"),
+        (lambda s: s["scenario"].update(fingerprint="0123456789abcdef"), r"scenario\.fingerprint is '0123456789abcdef'"),
+        (lambda s: s["control"].update(dt_s=0.05), r"control\.dt_s is 0\.05, not 0\.1"),
+        (lambda s: s["scenario"]["config"]["pursuer"]["sensor"].update(range=9.0), "the sidecar was edited"),
+    ],
+)
+def test_export_check_refuses_an_edited_sidecar(exports, tmp_path: Path, edit, expected: str) -> None:
+    checkpoint, model = exports["none"]
+    copy = tmp_path / "m.onnx"
+    copy.write_bytes(model.read_bytes())
+    sidecar = json.loads(sidecar_path(model).read_text())
+    edit(sidecar)
+    sidecar_path(copy).write_text(json.dumps(sidecar))
+    result = runner.invoke(app, ["export", "check", str(copy), str(checkpoint), "-n", "1"])
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+    assert re.search(expected, result.output.replace("\n", "")), result.output

@@ -117,7 +117,8 @@ def test_wrong_role_and_unknown_names(paper: Scenario) -> None:
         resolve_policy("sneaky", "evader", paper)
     with pytest.raises(PolicyError, match="policy file not found"):
         resolve_policy("zoo/missing.zip", "evader", paper)
-    assert set(BUILTINS) == {"pure-pursuit", "greedy", "random-walk", "rash"}
+    assert set(BUILTINS) == {"pure-pursuit", "greedy", "random-walk", "rash", "interceptor", "circler", "blindside",
+                             "wall-runner"}
 
 
 @pytest.fixture

@@ -63,7 +63,7 @@ def mutate(path: str, value) -> dict:
     keys = path.split(".")
     node = data
     for key in keys[:-1]:
-        node = node[key]
+        node = node.setdefault(key, {})
     node[keys[-1]] = value
     return data
 
@@ -124,3 +124,98 @@ def test_fingerprint_tracks_the_game_not_the_name(paper) -> None:
     assert renamed.fingerprint() == paper.fingerprint()
     slower = paper.model_copy(update={"evader": paper.evader.model_copy(update={"v_max": 1.0})})
     assert slower.fingerprint() != paper.fingerprint()
+
+
+# -- strict configs (issue 20): finite numbers, no duplicate keys, no bool/number mix-ups, plausible sizes ----------
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "expected"),
+    [
+        ("pursuer.v_min", math.nan, r"pursuer\.v_min: must be a finite number \(got nan\)"),
+        ("dt", math.inf, r"dt: must be a finite number \(got inf\)"),
+        ("pursuer.v_max", math.inf, r"pursuer\.v_max: must be a finite number"),
+        ("arena.width", math.inf, r"arena\.width: must be a finite number"),
+        ("reward.capture", math.inf, r"reward\.capture: must be a finite number"),
+        ("pursuer.sensor.fov", -math.inf, r"pursuer\.sensor\.fov: must be a finite number"),
+        ("training.learning_rate", math.nan, r"training\.learning_rate: must be a finite number"),
+        ("training.belief_settings.learning_rate", math.inf, r"belief_settings\.learning_rate: must be a finite"),
+        ("horizon", True, r"horizon: a number is expected here, not the boolean true"),
+        ("dt", False, r"dt: a number is expected here, not the boolean false"),
+        ("training.net_arch", [128, True], r"training\.net_arch\.1: a number is expected here"),
+        ("training.curriculum.enabled", 1, r"training\.curriculum\.enabled: true or false is expected here \(got 1\)"),
+        ("training.steps", 10**40, r"training\.steps: .*less than or equal to"),
+        ("horizon", 10**9, r"horizon: .*less than or equal to"),
+        ("training.net_arch", [10**12], r"training\.net_arch\.0: .*less than or equal to"),
+        ("training.net_arch", [64] * 100, r"training\.net_arch: .*at most 32"),
+        ("training.steps", 2.5, r"training\.steps: .*valid integer \(got 2\.5\)"),
+    ],
+)
+def test_non_finite_boolean_and_absurd_values_are_refused(tmp_path: Path, key: str, value, expected: str) -> None:
+    path = write(tmp_path, mutate(key, value))
+    with pytest.raises(ConfigError, match=expected) as info:
+        load_scenario(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+def test_yaml_spellings_of_numbers_are_read(tmp_path: Path) -> None:
+    """YAML 1.1 reads ``1e-4`` and ``1e5`` as strings: they are numbers all the same, and ``1.0e+5`` is a count."""
+    text = (builtin_config_dir() / "quick.yaml").read_text()
+    text = text.replace("steps: 100000", "steps: 1e5\n  learning_rate: 1e-4\n  n_envs: 1.6e+1")
+    scenario = load_scenario(write(tmp_path, text))
+    assert (scenario.training.steps, scenario.training.learning_rate, scenario.training.n_envs) == (100_000, 1e-4, 16)
+    assert isinstance(scenario.training.steps, int)
+
+
+def test_duplicate_keys_are_refused_with_their_lines(tmp_path: Path) -> None:
+    text = (builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150", "horizon: 150\nhorizon: 400")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: line 7: duplicate key 'horizon' \(first given on line 6\)"):
+        load_scenario(write(tmp_path, text))
+    nested = (builtin_config_dir() / "quick.yaml").read_text().replace("range: 6.0, fov", "range: 6.0, range: 7.0, fov")
+    with pytest.raises(ConfigError, match=r"duplicate key 'range'"):
+        load_scenario(write(tmp_path, nested))
+
+
+def test_merge_keys_may_override(tmp_path: Path) -> None:
+    """YAML's ``<<: *anchor`` merge is not a duplicate: the mapping's own key overrides the merged one."""
+    text = (builtin_config_dir() / "quick.yaml").read_text()
+    text = text.replace("evader:\n  kind: point_mass", "evader:\n  <<: &pm {kind: point_mass, v_max: 9.0}\n  kind: point_mass")
+    assert load_scenario(write(tmp_path, text)).evader.v_max == 1.5
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "expected"),
+    [
+        ("training.n_envs", 100_000_000, r"training\.n_envs: 100000000 games need ~[\d,]+ GiB; one process steps at most"),
+        ("training.net_arch", [60_000, 60_000, 60_000], r"training\.net_arch: \[60000, 60000, 60000\] need ~[\d,]+ GiB"),
+        ("training.buffer_size", 100_000_000, r"training\.buffer_size: 100000000 transitions need ~[\d,]+ GiB .*limit"),
+    ],
+)
+def test_sizes_that_need_too_much_memory_are_refused_with_the_estimate(tmp_path: Path, key, value, expected) -> None:
+    data = mutate(key, value)
+    data["training"]["belief"] = "bimdn"
+    with pytest.raises(ConfigError, match=expected):
+        load_scenario(write(tmp_path, data))
+
+
+@pytest.mark.parametrize("name", BUILTINS)
+def test_builtins_fit_the_memory_limit(name: str) -> None:
+    from pecli.scenario import MEMORY_LIMIT, memory_estimate
+
+    scenario = load_scenario(name)
+    for belief in ("none", "bimdn-mixed"):
+        training = scenario.training.model_copy(update={"belief": belief})
+        assert 0 < sum(memory_estimate(scenario.model_copy(update={"training": training})).values()) < MEMORY_LIMIT / 16
+
+
+def test_set_overrides_are_validated_as_strictly_as_files(quick) -> None:
+    from pecli.rl.train import parse_overrides, with_overrides
+
+    for item, expected in (("learning_rate=.inf", r"--set: training\.learning_rate: must be a finite number"),
+                           ("learning_rate=nan", "must be a finite number"),
+                           ("n_envs=true", "not the boolean true"),
+                           ("curriculum.enabled=1", "true or false is expected"),
+                           ("n_envs=100000000", "games need")):
+        with pytest.raises(ConfigError, match=expected):
+            with_overrides(quick, parse_overrides([item]))
+    assert with_overrides(quick, parse_overrides(["learning_rate=1e-4", "steps=2e4"])).training.steps == 20_000

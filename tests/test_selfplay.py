@@ -307,3 +307,11 @@ def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     (tmp_path / "cli" / "selfplay.json").unlink()
     result = invoke(*common, "--name", "cli")
     assert result.exit_code == 1 and "not a self-play run" in result.output
+
+
+def test_a_diverging_self_play_stops_without_writing_its_round(tmp_path: Path) -> None:
+    sets = {**{k: v for k, v in TINY.items() if not k.startswith("selfplay")}, "learning_rate": "1e30"}
+    result = invoke("selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "nan", "--rounds", "1",
+                    "--steps-per-round", "400", "-q", *[x for k, v in sets.items() for x in ("--set", f"{k}={v}")])
+    assert result.exit_code == 1 and "training diverged at step" in result.output, result.output
+    assert not list((tmp_path / "nan").rglob("*.zip"))

@@ -137,3 +137,103 @@ def test_colliding_names_become_paths() -> None:
 def test_sampling_without_checkpoints_is_refused(quick: Scenario) -> None:
     with pytest.raises(PecliError, match="--sample draws opponents for checkpoints only"):
         schedule(baselines(quick), sample=4)
+
+
+# -- process hygiene (issue 21): a killed tournament leaves no worker behind; one writer per --out --------------------
+def _parents() -> dict[int, int]:
+    """PID -> parent PID of every live (not zombie) process, from /proc."""
+    found = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[0] != "Z":
+            found[int(stat.parent.name)] = int(fields[1])
+    return found
+
+
+def _descendants(pid: int) -> set[int]:
+    parents, found, frontier = _parents(), set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def _wait_for(condition, seconds: float, what: str) -> None:
+    import time
+
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.1)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("signal_name", ["SIGKILL", "SIGTERM"])
+def test_a_killed_tournament_leaves_no_worker_behind(tmp_path: Path, signal_name: str) -> None:
+    """Two workers: one finishes pairings, one is stuck in a pairing that never ends. Once a pairing is cached
+    the driver is killed; its workers and the resource tracker must be gone within seconds."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "t"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
+    command = [sys.executable, "-m", "pecli", "tournament", "--baselines", "stalling:StallingEvader", "-c", "quick",
+               "-n", "4", "--seeds", "1", "--workers", "2", "--out", str(out)]
+    driver = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    children: set[int] = set()
+    try:
+        _wait_for(lambda: driver.poll() is not None or any((out / "pairings").glob("*.json")), 180, "a cached pairing")
+        assert driver.poll() is None, driver.communicate()
+        children = _descendants(driver.pid)
+        assert len(children) >= 2  # the workers (and multiprocessing's resource tracker)
+        driver.send_signal(getattr(signal, signal_name))
+        driver.wait(timeout=60)
+        _wait_for(lambda: not children & set(_parents()), 20, f"the driver's children {children} to end")
+        if signal_name == "SIGTERM":  # ends as Ctrl-C does
+            stderr = driver.stderr.read()  # the workers, which shared the pipe, are gone: no wait
+            assert driver.returncode == 130 and "interrupted" in stderr and "Traceback" not in stderr, stderr
+    finally:
+        for pid in children | {driver.pid}:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        driver.communicate()
+
+
+def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick: Scenario) -> None:
+    import subprocess
+    import sys
+
+    out = tmp_path / "t"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from pecli.locks import acquire; "
+                               f"acquire({str(out)!r}, 'x'); print('locked', flush=True); time.sleep(120)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1",
+                                     "--workers", "1", "--out", str(out)])
+        assert result.exit_code == 1, result.output
+        assert f"is being written by process {holder.pid}" in result.output and "tournament output" in result.output
+        with pytest.raises(PecliError, match="being written"):
+            run_tournament(quick, baselines(quick), schedule(baselines(quick)), 2, [0], out)
+        assert not (out / "results.json").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    # the OS dropped the dead holder's lock: the folder can be written again
+    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1", "--workers", "1",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, result.output
+
+
+def test_an_impossible_batch_is_refused_before_it_is_allocated(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "10000000000", "--seeds", "1",
+                                 "-w", "1", "--out", str(tmp_path / "t")])
+    assert result.exit_code == 1 and "more than a pairing can play as one batch" in result.output

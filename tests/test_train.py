@@ -250,3 +250,56 @@ def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> No
     log.write_text("steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n300,3.0,3.0,0.6\n30")
     forget_evaluations_after(log, 200)  # evaluated at 300 after the commit at 200, then killed mid-line
     assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"
+
+
+# -- a diverged training stops and writes nothing broken (issue 21) ----------------------------------------------------
+def test_a_diverging_run_stops_in_one_line_without_a_final_checkpoint(tmp_path: Path) -> None:
+    """A learning rate of 1e30 is finite (strict configs take it) but makes the networks NaN within a few updates."""
+    result = train(tmp_path, "--steps", "1000", "--set", "learning_rate=1e30")
+    assert result.exit_code == 1, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "training diverged at step" in errors[0] and "loss is nan" in errors[0]
+    role = tmp_path / "run" / "pursuer"
+    assert not (role / "final.zip").exists() and not (role / "last.zip").exists()
+
+
+def tiny_model(quick: Scenario, **settings):
+    from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
+
+    scenario = with_overrides(quick, {"n_envs": 2, "net_arch": [8], "buffer_size": 500, **settings})
+    job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="x")
+    return make_model(job, make_env(job, resolve_policy("greedy", "evader", scenario), 0), None)
+
+
+def test_the_finite_check_stops_training_before_later_callbacks_see_a_broken_actor(quick: Scenario) -> None:
+    import torch as th
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from pecli.rl.callbacks import FiniteCheck, TrainingDiverged, non_finite_parameters
+
+    class Poison(BaseCallback):
+        def __init__(self, at: int, module: str) -> None:
+            super().__init__()
+            self.at, self.module = at, module
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.at:
+                with th.no_grad():
+                    next(getattr(self.model.policy, self.module).parameters()).fill_(math.nan)
+            return True
+
+    class Saver(BaseCallback):  # stands for the checkpoints and evaluations after the check
+        seen: list[int] = []
+
+        def _on_step(self) -> bool:
+            self.seen.append(non_finite_parameters(self.model.policy.actor))
+            return True
+
+    model = tiny_model(quick, learning_starts=10_000)  # no updates: the parameters themselves are checked
+    saver = Saver()
+    with pytest.raises(TrainingDiverged, match=r"step 20: 1 actor parameter tensors hold NaN or inf"):
+        model.learn(100, callback=CallbackList([Poison(20, "actor"), FiniteCheck(), saver]))
+    assert len(saver.seen) == 9 and not any(saver.seen)
+    model = tiny_model(quick, learning_starts=10_000)  # a critic is checked when training ends, before any final save
+    with pytest.raises(TrainingDiverged, match="parameter tensors of the policy"):
+        model.learn(40, callback=CallbackList([Poison(20, "critic"), FiniteCheck()]))

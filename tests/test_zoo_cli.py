@@ -111,3 +111,39 @@ def test_a_damaged_run_config_leaves_the_scenario_to_config(zoo: Path, tmp_path:
     assert result.exit_code == 0, result.output
     result = invoke("play", "-p", str(run / "pursuer" / "final.zip"), "-n", "2")  # falls back to paper, then refuses
     assert result.exit_code == 1 and "pass the config it was trained with" in result.output
+
+
+def test_best_passes_over_a_damaged_checkpoint(zoo: Path, tmp_path: Path) -> None:
+    """The top-rated checkpoint is a zero-byte file (a full disk, a cut copy): the next good one is named."""
+    import json
+
+    run = tmp_path / "zoo" / "p"
+    shutil.copytree(zoo / "p", run)
+    good = run / "pursuer" / "final.zip"
+    for name, content in (("empty", b""), ("cut", good.read_bytes()[: good.stat().st_size // 2])):
+        (run / "pursuer" / f"{name}.zip").write_bytes(content)
+        shutil.copy(good.with_suffix(".json"), run / "pursuer" / f"{name}.json")
+    ratings = [{"name": n, "spec": str(run / "pursuer" / f"{n}.zip"), "role": "pursuer", "elo": elo, "stderr": 1.0}
+               for n, elo in (("empty", 1500.0), ("cut", 1400.0), ("final", 1000.0))]
+    (tmp_path / "zoo" / "tournament").mkdir()
+    (tmp_path / "zoo" / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
+    result = invoke("zoo", "best", "pursuer", str(tmp_path / "zoo"))
+    assert result.exit_code == 0, result.output
+    assert result.stdout.strip() == str(good)
+    assert "empty.zip: empty file" in result.output and "cut.zip: not a pecli checkpoint" in result.output
+    good.write_bytes(b"")
+    result = invoke("zoo", "best", "pursuer", str(tmp_path / "zoo"))
+    assert result.exit_code == 1 and "every rated pursuer checkpoint" in result.output
+
+
+def test_show_refuses_a_zip_that_is_not_a_checkpoint(zoo: Path, tmp_path: Path) -> None:
+    import zipfile
+
+    other = tmp_path / "photos.zip"
+    with zipfile.ZipFile(other, "w") as archive:
+        archive.writestr("holiday.jpg", b"\xff\xd8")
+    shutil.copy(zoo / "p" / "pursuer" / "final.json", tmp_path / "photos.json")  # metadata beside it, by mistake
+    result = invoke("zoo", "show", str(other))
+    assert result.exit_code == 1 and "not a pecli checkpoint (no 'data' in the zip" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert invoke("zoo", "show", str(zoo / "p" / "pursuer" / "final.zip")).exit_code == 0

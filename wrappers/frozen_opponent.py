@@ -170,7 +170,33 @@ class FrozenOpponentCore:
         return self._observation(), scaled, done, infos
 
 
-class FrozenOpponentVecEnv(VecEnv):
+class DelegatingVecEnv(VecEnv):
+    """The ``VecEnv`` plumbing shared by pecli's views: attributes and methods go to ``self.target``,
+    the object that holds the games (one object for all ``num_envs`` games)."""
+
+    target: Any
+
+    def set_curriculum(self, pursuer_fov: float, evader_speed_scale: float) -> None:
+        self.target.set_curriculum(pursuer_fov, evader_speed_scale)
+
+    def close(self) -> None:
+        return None
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self.target, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self.target, attr_name, value)
+
+    def env_method(self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any) -> list[Any]:
+        result = getattr(self.target, method_name)(*args, **kwargs)
+        return [result] * len(self._get_indices(indices))
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
+
+
+class FrozenOpponentVecEnv(DelegatingVecEnv):
     """SB3 ``VecEnv`` over ``n`` games of one batched game, in one process.
 
     Args:
@@ -185,7 +211,7 @@ class FrozenOpponentVecEnv(VecEnv):
     def __init__(
         self, scenario: Scenario, role: Role, opponent: Policy, n: int, seed: int = 0, history: bool = True
     ) -> None:
-        self.core = FrozenOpponentCore(scenario, role, opponent, n, seed, history=history)
+        self.core = self.target = FrozenOpponentCore(scenario, role, opponent, n, seed, history=history)
         super().__init__(n, self.core.observation_space, self.core.action_space)
         self._actions: np.ndarray | None = None
         self._next_seed: int | None = seed
@@ -207,25 +233,6 @@ class FrozenOpponentVecEnv(VecEnv):
     def seed(self, seed: int | None = None) -> list[int | None]:
         self._next_seed = seed
         return [seed] * self.num_envs
-
-    def set_curriculum(self, pursuer_fov: float, evader_speed_scale: float) -> None:
-        self.core.set_curriculum(pursuer_fov, evader_speed_scale)
-
-    def close(self) -> None:
-        return None
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self.core, attr_name)] * len(self._get_indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self.core, attr_name, value)
-
-    def env_method(self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any) -> list[Any]:
-        result = getattr(self.core, method_name)(*args, **kwargs)
-        return [result] * len(self._get_indices(indices))
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
 
 
 class FrozenOpponentEnv(gym.Env):

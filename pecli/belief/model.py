@@ -92,7 +92,8 @@ class BeliefModel(nn.Module):
     def mixture(self, history: th.Tensor) -> Mixture:
         """The belief for flattened windows ``(B, samples * dim)``."""
         if self.net is None:
-            return self.ukf(history.detach().cpu().numpy())
+            mixture = self.ukf(history.detach().cpu().numpy())
+            return Mixture(*(part.to(history.device) for part in (mixture.logits, mixture.means, mixture.stds)))
         return self.net(history.reshape(history.shape[0], *self.window))
 
     @th.no_grad()
@@ -114,5 +115,10 @@ class BeliefModel(nn.Module):
             points = mixture.mean()
         return self.frame(points, newest).flatten(1)
 
+    @property
+    def device(self) -> th.device:
+        """Where the belief's network is (the CPU for one without parameters)."""
+        return next((p.device for p in self.parameters()), th.device("cpu"))
+
     def features_numpy(self, history: np.ndarray) -> np.ndarray:
-        return self.features(th.as_tensor(history, dtype=th.float32)).numpy()
+        return self.features(th.as_tensor(history, dtype=th.float32, device=self.device)).cpu().numpy()

@@ -27,6 +27,8 @@ def _report_table(title: str, parity: dict) -> Table:
     for column in ("episodes", "steps", "opponent", "max Δ action", "max Δ command", "tolerance", "parity"):
         table.add_column(column, justify="left" if column == "opponent" else "right")
     verdict = "[green]ok[/]" if parity["passed"] else "[red]FAILED[/]"
+    if parity["non_finite"]:
+        verdict += f" ({parity['non_finite']} NaN/inf)"
     table.add_row(str(parity["episodes"]), str(parity["steps"]), parity["opponent"],
                   f"{parity['max_action_difference']:.2e}", f"{parity['max_command_difference']:.2e}",
                   f"{parity['tolerance']:g}", verdict)
@@ -96,5 +98,4 @@ def check(
     else:
         console.print(_report_table(f"parity of {model.name} against {checkpoint.name}", parity))
     if not report.passed:
-        raise PecliError(f"parity check failed: actions differ by up to {report.max_action_difference:.3g} "
-                         f"(tolerance {report.tolerance:g})")
+        raise PecliError(f"parity check failed: {report.failure()}")

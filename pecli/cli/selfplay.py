@@ -1,4 +1,4 @@
-"""``pecli selfplay``: alternating self-play of a pursuer and an evader, each against the other's pool."""
+"""``pecli selfplay``: self-play of a pursuer and an evader, alternating against each other's pools or simultaneous."""
 
 from __future__ import annotations
 
@@ -10,15 +10,21 @@ from typing import Annotated
 import typer
 
 from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
-from pecli.cli.train import BeliefChoice
+from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
+
+
+class ScheduleChoice(str, enum.Enum):
+    alternating = "alternating"
+    simultaneous = "simultaneous"
 
 
 class OpponentsChoice(str, enum.Enum):
     latest = "latest"
     uniform = "uniform"
     pfsp = "pfsp"
+    league = "league"
 
 
 @user_errors
@@ -32,37 +38,52 @@ def selfplay(
     belief: Annotated[
         BeliefChoice | None, typer.Option("--belief", help="What each actor knows of the unseen opponent (default: the config's).")
     ] = None,
+    schedule: Annotated[
+        ScheduleChoice | None,
+        typer.Option("--schedule", help="alternating: one side trains at a time against the other's pool; "
+                     "simultaneous: both learn in the same games every step (the paper's MADDPG). "
+                     "Default: the config's, alternating."),
+    ] = None,
     opponents: Annotated[
         OpponentsChoice | None,
-        typer.Option("--opponents", help="How opponents are drawn from the pool: latest, uniform (fictitious self-play) "
-                     "or pfsp (prioritised by how often they win). Default: the config's, pfsp."),
+        typer.Option("--opponents", help="How opponents are drawn from the pool: latest, uniform (fictitious self-play), "
+                     "pfsp (prioritised by how often they win) or league (pfsp, plus an exploiter per side and "
+                     "pecli's scripted adversaries kept in the pools). Default: the config's, pfsp."),
     ] = None,
     seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, draws, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-selfplay-seed-time).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its last finished turn.")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,
     overrides: Annotated[
         list[str] | None,
         typer.Option("--set", help="Override a training setting, e.g. --set selfplay.pfsp_power=1 --set n_envs=16."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view (the line per round stays).")] = False,
+    algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm (both sides).")] = None,
+    device: DeviceOption = "cpu",
 ) -> None:
-    """Train a pursuer and an evader by alternating self-play.
+    """Train a pursuer and an evader by self-play.
 
-    Each round trains the pursuer against evaders drawn from the evader pool, then the evader
-    against the pursuer pool; each new checkpoint joins its side's pool. Pools start with the
-    heuristic baselines. Both learners keep their networks and replay buffers from round to round.
-    Checkpoints go to [bold]zoo/<run>/<role>/round-NNN.zip[/] with their lineage; Ctrl-C stops, and
-    [bold]--resume[/] continues from the last finished turn. Settings: the config's
+    Alternating (the default): each round trains the pursuer against evaders drawn from the evader
+    pool, then the evader against the pursuer pool; each new checkpoint joins its side's pool. Pools
+    start with the paper's heuristic baselines. Simultaneous ([bold]--schedule simultaneous[/], the
+    paper's MADDPG): both learners play each other in the same games and both learn every step.
+    Both learners keep their networks and replay buffers from round to round. Checkpoints go to
+    [bold]zoo/<run>/<role>/round-NNN.zip[/] with their lineage; however the run stops,
+    [bold]--resume[/] continues from its newest checkpoint. Settings: the config's
     [bold]training.selfplay[/] section.
     """
+    from pecli.rl.algorithms import torch_device
     from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
 
+    torch_device(device)  # a machine without CUDA refuses --device cuda in one line
     settings = parse_overrides(overrides or [])
     for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
-                       ("belief", belief.value if belief else None), ("selfplay.opponents", opponents.value if opponents else None)):
+                       ("algo", algo.value if algo else None),
+                       ("belief", belief.value if belief else None), ("selfplay.opponents", opponents.value if opponents else None),
+                       ("selfplay.schedule", schedule.value if schedule else None)):
         if value is not None:
             settings[key] = value
     if resume:
@@ -94,6 +115,7 @@ def selfplay(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        device=device,
     )
 
     def interrupt(signum: int, frame: object) -> None:
@@ -104,10 +126,11 @@ def selfplay(
         loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
         err_console.print(
             f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side "
-            f"on {scenario.name}, opponents {sp.opponents}, belief {scenario.training.belief}", highlight=False)
+            f"on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
+            + f", belief {scenario.training.belief}", highlight=False)
         final = loop.run()
     except SelfPlayInterrupted as stop:
-        err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); finished turns are saved: "
+        err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
     finally:

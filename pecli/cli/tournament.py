@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from pathlib import Path
 from typing import Annotated
 
@@ -12,6 +13,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from pecli.cli.common import console, err_console, one_torch_thread, require_positive, scenario_for, user_errors
 from pecli.errors import PecliError
+
+MAX_EPISODES = 1_000_000  # per seed and pairing: they are played as one batched game
 
 
 @user_errors
@@ -50,10 +53,14 @@ def tournament(
     Results go to [bold]--out[/]: results.json, results.csv, capture_rates.png and a cache that
     [bold]--resume[/] reuses.
     """
+    from pecli.locks import locked
     from pecli.reports import ratings_table, results_table, write_reports
     from pecli.tournament import find_players, run_tournament, schedule
 
     require_positive(episodes, "--episodes")
+    if episodes > MAX_EPISODES:
+        raise PecliError(f"--episodes {episodes} is more than a pairing can play as one batch (at most {MAX_EPISODES:,}"
+                         " per seed, about 1.5 KiB each): add --seeds instead")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []
@@ -61,41 +68,57 @@ def tournament(
         out = Path(paths[0]) / "tournament" if paths and Path(paths[0]).is_dir() else Path("runs/tournament")
     if not paths and not baselines:
         raise PecliError("nothing to play: give zoo folders or checkpoints, and/or --baselines")
-    cache = out / "pairings"
-    if cache.is_dir() and any(cache.iterdir()) and not resume:
-        raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, or another --out")
-    scenario = scenario_for(paths, config, folders=True)
-    found = find_players(paths, scenario, baselines=baselines)
-    for reason in found.skipped:
-        err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)
-    pairings = schedule(found.players, sample=sample, seed=seed)
-    one_torch_thread()
-    counts = {role: len(players) for role, players in found.players.items()}
-    err_console.print(
-        f"{counts['pursuer']} pursuers × {counts['evader']} evaders on {scenario.name}: {len(pairings)} pairings "
-        f"of {episodes} × {seeds} episodes, {workers} worker{'s' if workers > 1 else ''}",
-        highlight=False,
-    )
 
-    with Progress(
-        TextColumn("[bold]pairings"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
-        TimeElapsedColumn(), TimeRemainingColumn(), console=err_console, transient=True,
-        disable=as_json or not err_console.is_terminal,
-    ) as progress:
-        task = progress.add_task("pairings", total=len(pairings), last="")
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # SIGTERM (a scheduler, a time limit) stops like Ctrl-C: workers end too
 
-        def report(result, cached: bool) -> None:
-            note = " (cached)" if cached else ""
-            progress.update(task, advance=1, last=f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
+    out.mkdir(parents=True, exist_ok=True)
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        with locked(out, "tournament output"):
+            cache = out / "pairings"
+            if cache.is_dir() and any(cache.iterdir()) and not resume:
+                raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, "
+                                 "or another --out")
+            scenario = scenario_for(paths, config, folders=True)
+            found = find_players(paths, scenario, baselines=baselines)
+            for reason in found.skipped:
+                err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)
+            pairings = schedule(found.players, sample=sample, seed=seed)
+            one_torch_thread()
+            counts = {role: len(players) for role, players in found.players.items()}
+            err_console.print(
+                f"{counts['pursuer']} pursuers × {counts['evader']} evaders on {scenario.name}: "
+                f"{len(pairings)} pairings of {episodes} × {seeds} episodes, "
+                f"{workers} worker{'s' if workers > 1 else ''}",
+                highlight=False,
+            )
 
-        results = run_tournament(
-            scenario, found.players, pairings, episodes, list(range(seeds)), out, workers=workers, on_result=report
-        )
-    written = write_reports(results, out)
-    if as_json:
-        typer.echo(json.dumps(results.to_json(), indent=2))
-        return
-    if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
-        console.print(results_table(results))
-    console.print(ratings_table(results, limit=40))
-    err_console.print("wrote " + ", ".join(str(p) for p in written), highlight=False)
+            with Progress(
+                TextColumn("[bold]pairings"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
+                TimeElapsedColumn(), TimeRemainingColumn(), console=err_console, transient=True,
+                disable=as_json or not err_console.is_terminal,
+            ) as progress:
+                task = progress.add_task("pairings", total=len(pairings), last="")
+
+                def report(result, cached: bool) -> None:
+                    note = " (cached)" if cached else ""
+                    last = f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}"
+                    progress.update(task, advance=1, last=last)
+
+                results = run_tournament(scenario, found.players, pairings, episodes, list(range(seeds)), out,
+                                         workers=workers, on_result=report)
+            written = write_reports(results, out)
+            if as_json:
+                typer.echo(json.dumps(results.to_json(), indent=2))
+                return
+            if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
+                console.print(results_table(results))
+            console.print(ratings_table(results, limit=40))
+            err_console.print("wrote " + ", ".join(str(p) for p in written), highlight=False)
+    except KeyboardInterrupt:
+        err_console.print(f"[yellow]interrupted[/]: the finished pairings are cached in {out}; continue with --resume",
+                          highlight=False)
+        raise typer.Exit(code=130) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)

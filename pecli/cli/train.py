@@ -1,4 +1,4 @@
-"""``pecli train pursuer|evader``: train one role with TD3/DDPG against a frozen opponent."""
+"""``pecli train pursuer|evader``: train one role (TD3, DDPG, SAC, TQC or CrossQ) against a frozen opponent."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import typer
 from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import PecliError
-from pecli.scenario import load_scenario
+from pecli.scenario import ALGOS, load_scenario
 
 
 class RoleChoice(str, enum.Enum):
@@ -20,12 +20,12 @@ class RoleChoice(str, enum.Enum):
     evader = "evader"
 
 
-class AlgoChoice(str, enum.Enum):
-    td3 = "td3"
-    ddpg = "ddpg"
-
-
+AlgoChoice = enum.Enum("AlgoChoice", {name: name for name in ALGOS}, type=str)
 BeliefChoice = enum.Enum("BeliefChoice", {kind.replace("-", "_"): kind for kind in BELIEF_KINDS}, type=str)
+DeviceOption = Annotated[
+    str, typer.Option("--device", help="Where the networks train: cpu, cuda (cuda:N) or auto (CUDA if there is "
+                      "one, as in SB3); checkpoints load on the CPU wherever they trained.")
+]
 
 
 @user_errors
@@ -52,6 +52,7 @@ def train(
         typer.Option("--set", help="Override a training setting, e.g. --set batch_size=256 --set curriculum.enabled=false."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
+    device: DeviceOption = "cpu",
 ) -> None:
     """Train a pursuer or an evader with Stable-Baselines3 against a frozen opponent.
 
@@ -61,6 +62,7 @@ def train(
     continues it from its newest checkpoint, replay buffer included.
     TensorBoard logs are in zoo/<run>/tb.
     """
+    from pecli.rl.algorithms import torch_device
     from pecli.rl.train import (
         DEFAULT_OPPONENT,
         TrainingInterrupted,
@@ -73,6 +75,7 @@ def train(
     from pecli.zoo import Run
 
     role_name = role.value
+    torch_device(device)  # a machine without CUDA refuses --device cuda in one line
     settings = parse_overrides(overrides or [])
     if steps is not None:
         settings["steps"] = steps
@@ -116,6 +119,7 @@ def train(
         resume=resume,
         progress=not quiet and err_console.is_terminal,
         curriculum_steps=curriculum_steps,
+        device=device,
     )
 
     def started(run: Run) -> None:

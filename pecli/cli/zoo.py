@@ -51,10 +51,12 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
 @user_errors
 def show(checkpoint: Annotated[Path, typer.Argument(help="A checkpoint file (.zip).")]) -> None:
     """Print a checkpoint's metadata (and lineage, for self-play checkpoints) as JSON."""
-    from pecli.zoo import read_metadata
+    from pecli.zoo import checkpoint_problem, read_metadata
 
     if not checkpoint.is_file():
         raise PecliError(f"no checkpoint at {checkpoint}")
+    if problem := checkpoint_problem(checkpoint, thorough=True):
+        raise PecliError(f"{checkpoint}: {problem}")
     console.print_json(json.dumps(read_metadata(checkpoint).to_dict()))
 
 
@@ -65,6 +67,7 @@ def remove(
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask for confirmation.")] = False,
 ) -> None:
     """Delete a run (its folder) or one checkpoint (the zip and its metadata)."""
+    from pecli.locks import locked
     from pecli.zoo import metadata_path
 
     if target.is_dir():
@@ -78,7 +81,8 @@ def remove(
     if not yes and not typer.confirm(f"Delete {what}?", err=True):
         raise typer.Exit(code=1)
     if target.is_dir():
-        shutil.rmtree(target)
+        with locked(target, f"run '{target.name}'"):  # not while a training writes it
+            shutil.rmtree(target)
     else:
         target.unlink()
         metadata_path(target).unlink(missing_ok=True)
@@ -91,13 +95,28 @@ def best(
     role: Annotated[str, typer.Argument(help="pursuer or evader.")],
     zoo: ZooArgument = Path("zoo"),
 ) -> None:
-    """Print the path of the highest-rated checkpoint of ROLE (from the zoo's tournament results)."""
-    from pecli.zoo import tournament_ratings
+    """Print the path of the highest-rated checkpoint of ROLE (from the zoo's tournament results).
+
+    A rated checkpoint that is gone, damaged or without its metadata is passed over (with a warning).
+    """
+    from pecli.zoo import ZooError, checkpoint_problem, read_metadata, tournament_ratings
 
     if role not in ("pursuer", "evader"):
         raise PecliError(f"role must be pursuer or evader, not '{role}'")
-    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and path.endswith(".zip") and Path(path).is_file()]
+    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and path.endswith(".zip")
+             and Path(path).is_file()]
     if not rated:
         raise PecliError(f"no rated {role} checkpoint in {zoo}: run `pecli tournament {zoo}` first")
-    top = max(rated, key=lambda r: r["elo"])
-    typer.echo(Path(top["spec"]))
+    for entry in sorted(rated, key=lambda r: -r["elo"]):
+        path = Path(entry["spec"])
+        problem = checkpoint_problem(path, thorough=True)
+        if not problem:
+            try:
+                read_metadata(path)
+            except ZooError:
+                problem = "no readable metadata"
+        if not problem:
+            typer.echo(path)
+            return
+        err_console.print(f"[yellow]skipped[/] {path}: {problem}", highlight=False, soft_wrap=True)
+    raise PecliError(f"every rated {role} checkpoint in {zoo} is damaged: train or copy them again")

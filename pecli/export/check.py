@@ -33,13 +33,22 @@ class ParityReport:
     decisions: int  # (game, step) pairs at which both decided
     opponent: str
     seed: int
-    max_action_difference: float  # in [-1, 1] action units
-    max_command_difference: float  # in the command's units (rad/s, m/s^2)
+    max_action_difference: float  # in [-1, 1] action units, over the actions both gave as finite numbers
+    max_command_difference: float  # in the command's units (rad/s, m/s^2), likewise
     tolerance: float = TOLERANCE
+    non_finite: int = 0  # (game, step) pairs where either side's action or the export's command was NaN or inf
 
     @property
     def passed(self) -> bool:
-        return self.max_action_difference <= self.tolerance
+        return self.non_finite == 0 and self.max_action_difference <= self.tolerance
+
+    def failure(self) -> str:
+        """Why the check failed, in words (empty when it passed)."""
+        if self.non_finite:
+            return f"{self.non_finite} actions or commands were NaN or infinite"
+        if not self.passed:
+            return f"actions differ by up to {self.max_action_difference:.3g} (tolerance {self.tolerance:g})"
+        return ""
 
     def to_dict(self) -> dict[str, float | int | str | bool]:
         return {**asdict(self), "passed": self.passed}
@@ -83,11 +92,15 @@ def check_parity(
     exported.reset(episodes, seed=dict(zip(ROLES, policy_seeds(seed)))[exported.role])
     limits = exported.model.limits
     action_gap = command_gap = 0.0
-    decisions = 0
+    decisions = non_finite = 0
     for step, (obs, action) in enumerate(zip(observations, actions)):
         played = exported.act(obs)
-        action_gap = max(action_gap, float(np.abs(played - action).max()))
-        command_gap = max(command_gap, float(np.abs(exported.command - action * limits).max()))
+        # compare finite numbers only: NaN - NaN is NaN, and max(0.0, NaN) is 0.0, a silent pass
+        finite = np.isfinite(played).all(1) & np.isfinite(action).all(1) & np.isfinite(exported.command).all(1)
+        non_finite += int((~finite).sum())
+        if finite.any():
+            action_gap = max(action_gap, float(np.abs(played - action)[finite].max()))
+            command_gap = max(command_gap, float(np.abs(exported.command - action * limits)[finite].max()))
         decisions += episodes if step % exported.frame_skip == 0 else 0
     return ParityReport(
         episodes=episodes,
@@ -97,4 +110,5 @@ def check_parity(
         seed=seed,
         max_action_difference=action_gap,
         max_command_difference=command_gap,
+        non_finite=non_finite,
     )

@@ -20,7 +20,7 @@ from pecli import __version__
 from pecli.errors import ExportError
 from pecli.export.check import ParityReport, check_parity
 from pecli.export.graph import DEFAULT_OPSET, MIN_OPSET, PolicyGraph, max_opset, to_onnx
-from pecli.export.sidecar import build_sidecar
+from pecli.export.sidecar import build_sidecar, sidecar_differences
 from pecli.game.si import SILayout
 from pecli.io import atomic_path, atomic_write_json
 from pecli.policies.exported import ExportedPolicy, exported_scenario
@@ -57,6 +57,14 @@ def example_inputs(layout: SILayout, learned: LearnedPolicy, batch: int = 2) -> 
         "uniform": th.full((batch, learned.draws), 0.5),
         "normal": th.zeros((batch, learned.draws, 2)),
     }
+
+
+def require_finite(learned: LearnedPolicy, checkpoint: Path) -> None:
+    """:class:`ExportError` when the actor (belief included) holds a NaN or an infinity: it would command NaN."""
+    broken = [name for name, p in learned.actor.named_parameters() if not th.isfinite(p).all()]
+    if broken:
+        raise ExportError(f"{checkpoint}: {len(broken)} weight tensors of the network are NaN or infinite "
+                          f"(e.g. {broken[0]}): a broken policy is not exported (its training diverged)")
 
 
 def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[PolicyGraph, bytes]:
@@ -110,14 +118,14 @@ def export_checkpoint(
     meta = read_metadata(checkpoint)
     scenario = scenario or checkpoint_scenario(checkpoint)
     learned = LearnedPolicy.load(checkpoint, meta.role, scenario)
+    require_finite(learned, checkpoint)
     layout = SILayout(scenario, meta.role)
     graph, data = onnx_bytes(learned, layout, opset)
     sidecar = build_sidecar(graph, scenario, meta, checkpoint, opset, learned.draws)
     exported = ExportedPolicy(ExportedModel.from_bytes(data, sidecar, source=str(out)), scenario)
     report = check_parity(exported, learned, scenario, episodes, seed)
     if not report.passed:
-        raise ExportError(f"parity check failed: the export's actions differ from the checkpoint's by up to "
-                          f"{report.max_action_difference:.3g} (tolerance {report.tolerance:g}); nothing written")
+        raise ExportError(f"parity check failed against the checkpoint: {report.failure()}; nothing written")
     with atomic_path(out) as tmp:
         tmp.write_bytes(data)
     sidecar.update(model_sha256=hashlib.sha256(data).hexdigest(), parity=report.to_dict())
@@ -138,6 +146,16 @@ def check_export(
     if sidecar.get("checkpoint", {}).get("sha256") != file_sha256(checkpoint):
         raise ExportError(f"{model} was exported from another checkpoint than {checkpoint} (SHA-256 differs)")
     scenario = exported_scenario(sidecar, source=str(sidecar_path(model)))
+    meta = read_metadata(checkpoint)
+    if meta.scenario_hash != scenario.fingerprint():
+        raise ExportError(f"{sidecar_path(model)}: its scenario ({scenario.fingerprint()}) is not the one "
+                          f"{checkpoint.name} was trained on ({meta.scenario_hash}): the sidecar was edited; "
+                          "export again")
     learned = LearnedPolicy.load(checkpoint, exported_model.role, scenario)  # type: ignore[arg-type]
+    require_finite(learned, checkpoint)
+    if differences := sidecar_differences(sidecar, scenario, learned.meta, learned.draws):
+        more = f" (and {len(differences) - 1} more)" if len(differences) > 1 else ""
+        raise ExportError(f"{sidecar_path(model)} does not match its scenario and checkpoint: {differences[0]}{more}; "
+                          "a robot would act on the wrong numbers: export again")
     return check_parity(ExportedPolicy(exported_model, scenario), learned, scenario, episodes, seed, opponent)
 

@@ -1,6 +1,6 @@
 """The exported graph: SI inputs → normalisation → belief → actor → SI command, as one torch module.
 
-It reproduces :meth:`pecli.policies.learned.LearnedPolicy._decide` (``actor.mu(actor.features_extractor(batch))``)
+It reproduces :meth:`pecli.policies.learned.LearnedPolicy._decide` (the actor's deterministic action of its features)
 with the unit conversions around it, and is traced to ONNX by :func:`to_onnx`.
 
 Inputs (``B`` is the batch, dynamic):
@@ -34,6 +34,7 @@ from pecli.belief.model import BeliefModel
 from pecli.export.beliefs import belief_module
 from pecli.export.encoder import SIEncoder
 from pecli.game.si import SILayout
+from pecli.rl.algorithms import deterministic_actor
 
 DEFAULT_OPSET = 17
 MIN_OPSET = 13  # the lowest opset every belief kind's operators export to and load back from
@@ -58,14 +59,15 @@ class PolicyGraph(nn.Module):
     """One player's whole decision, from SI rows to SI command.
 
     Args:
-        actor: the SB3 actor (its ``features_extractor`` holds the belief, if any, and ``mu`` the MLP).
+        actor: the SB3 actor (its ``features_extractor`` holds the belief, if any; its deterministic action is
+            :func:`pecli.rl.algorithms.deterministic_actor`), on the CPU.
         layout: the SI row layout of the player's role and scenario.
     """
 
     def __init__(self, actor: nn.Module, layout: SILayout) -> None:
         super().__init__()
         self.encoder = SIEncoder(layout)
-        self.mu = actor.mu
+        self.act = deterministic_actor(actor)
         belief: BeliefModel | None = getattr(actor.features_extractor, "belief", None)
         self.belief = belief_module(belief) if belief is not None else None
         self.frame = belief.frame if belief is not None else None  # belief points → the actor's frame
@@ -101,7 +103,7 @@ class PolicyGraph(nn.Module):
             points = mixture.sample_with(uniform, normal) if self.mixed else mixture.mean()  # as BeliefModel.features_of
             features = th.cat([features, self.frame(points, window[:, -1]).flatten(1)], dim=1)
             beliefs = (mixture.weights, mixture.means.double() * self.arena_half, mixture.stds.double() * self.arena_half)
-        action = self.mu(features)
+        action = self.act(features)
         return (action.double() * self.limits, action, *beliefs)
 
 

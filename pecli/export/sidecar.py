@@ -71,7 +71,7 @@ def build_sidecar(
 ) -> dict[str, Any]:
     """Everything but ``model_sha256`` and ``parity``, which the export adds once it has them."""
     layout = SILayout(scenario, meta.role)
-    sensor = scenario.agent(meta.role).sensor
+    controls = robot_fields(scenario, meta, draws)
     return {
         "format": FORMAT,
         "pecli_version": __version__,
@@ -86,6 +86,17 @@ def build_sidecar(
         },
         "scenario": {"name": scenario.name, "fingerprint": scenario.fingerprint(),
                      "config": scenario.model_dump(mode="json")},
+        **controls,
+        **io_layout(graph, layout, meta, draws),
+    }
+
+
+def robot_fields(scenario: Scenario, meta: CheckpointMeta, draws: int) -> dict[str, Any]:
+    """The sidecar's sections a robot acts on (``control``, ``sensor``, ``layout``, ``command_limits``):
+    what follows from the scenario and the checkpoint, so that :func:`sidecar_differences` can check them."""
+    layout = SILayout(scenario, meta.role)
+    sensor = scenario.agent(meta.role).sensor
+    return {
         "control": {
             "dt_s": scenario.dt,
             "rate_hz": 1.0 / scenario.dt,
@@ -105,5 +116,26 @@ def build_sidecar(
             "row": [field.to_dict() for field in layout.fields()],
         },
         "command_limits": list(command_limits(layout)),
-        **io_layout(graph, layout, meta, draws),
     }
+
+
+def sidecar_differences(sidecar: dict[str, Any], scenario: Scenario, meta: CheckpointMeta, draws: int) -> list[str]:
+    """Where ``sidecar`` disagrees with what ``scenario`` and the checkpoint's ``meta`` say, e.g.
+    ``"sensor.fov_rad is 1.0, not 2.0944"``: a sidecar edited by hand, or put beside another model."""
+    expected = {"role": meta.role, "belief": meta.belief, "scenario": {"fingerprint": scenario.fingerprint()},
+                **robot_fields(scenario, meta, draws)}
+    return _differences(sidecar, expected, "")
+
+
+def _differences(found: Any, expected: Any, where: str) -> list[str]:
+    if isinstance(expected, dict):
+        if not isinstance(found, dict):
+            return [f"{where} is {found!r}, not a section"]
+        return [d for key, value in expected.items()
+                for d in _differences(found.get(key), value, f"{where}.{key}".lstrip("."))]
+    if isinstance(expected, list) and isinstance(found, list) and len(found) == len(expected):
+        return [d for i, (f, e) in enumerate(zip(found, expected)) for d in _differences(f, e, f"{where}[{i}]")]
+    same = found == expected
+    if isinstance(expected, float) and isinstance(found, int | float) and not isinstance(found, bool):
+        same = math.isclose(found, expected, rel_tol=1e-12, abs_tol=1e-12)
+    return [] if same else [f"{where} is {found!r}, not {expected!r}"]

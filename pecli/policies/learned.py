@@ -46,6 +46,10 @@ class LearnedPolicy(WindowedPolicy):
         )
         self.actor = actor
         self.meta = meta
+        from pecli.rl.algorithms import deterministic_actor
+
+        actor.train(False)  # batch (re)normalisation layers (CrossQ) play with their running statistics
+        self._act = deterministic_actor(actor)
 
     @classmethod
     def load(cls, path: str | Path, role: Role, scenario: Scenario, seed: int | None = None) -> LearnedPolicy:
@@ -80,17 +84,18 @@ class LearnedPolicy(WindowedPolicy):
         return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
 
     def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:
-        """SB3's ``Actor.forward`` without its preprocessing, which insists on the training-time keys
-        (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window):
-        ``actor.mu(actor.features_extractor(batch))``."""
+        """SB3's deterministic ``Actor.forward`` without its preprocessing, which insists on the training-time
+        keys (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window):
+        ``deterministic_actor(actor)(actor.features_extractor(batch))``, on the actor's device."""
         batch = {"obs": stack}
         if history is not None:
             batch["history"] = history
         if draws is not None:
             batch["uniform"], batch["normal"] = draws
+        device = self.actor.device
         with th.no_grad():
-            features = self.actor.features_extractor({key: th.as_tensor(value) for key, value in batch.items()})
-            return self.actor.mu(features).numpy()
+            features = self.actor.features_extractor({key: th.as_tensor(value, device=device) for key, value in batch.items()})
+            return self._act(features).cpu().numpy()
 
     def __repr__(self) -> str:
         return f"LearnedPolicy(role={self.role!r}, algo={self.meta.algo!r}, steps={self.meta.steps})"

@@ -2,7 +2,9 @@
 
 A policy string is one of:
 
-* a built-in name: ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk`` (either);
+* a built-in name: the paper's ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk``
+  (either); pecli's adversaries ``interceptor`` (pursuer), ``circler``, ``blindside``, ``wall-runner``
+  (evaders, :mod:`pecli.policies.adversarial`);
 * a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
   ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
@@ -20,13 +22,15 @@ from pathlib import Path
 
 from pecli.errors import PecliError, PolicyError
 from pecli.policies.base import HeuristicPolicy, Policy
+from pecli.policies.adversarial import Blindside, Circler, Interceptor, WallRunner
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
 from pecli.roles import Role
 from pecli.scenario import Scenario
 
 BUILTINS: dict[str, type[HeuristicPolicy]] = {
-    cls.name: cls for cls in (PurePursuit, Greedy, RandomWalk, Rash)
+    cls.name: cls for cls in (PurePursuit, Greedy, RandomWalk, Rash, Interceptor, Circler, Blindside, WallRunner)
 }
+PAPER_BASELINES = ("pure-pursuit", "greedy", "random-walk", "rash")  # the rest are pecli's adversaries
 
 Loader = Callable[[Path, Role, Scenario, "int | None"], Policy]
 
@@ -75,9 +79,10 @@ def family_of(spec: str) -> str | None:
     return name if name in _FAMILIES else None
 
 
-def builtin_names(role: Role | None = None) -> list[str]:
-    """Names of the built-in policies, those that can play ``role`` if given."""
-    return [name for name, cls in BUILTINS.items() if role is None or role in cls.roles]
+def builtin_names(role: Role | None = None, paper_only: bool = False) -> list[str]:
+    """Names of the built-in policies, those that can play ``role`` if given, the paper's only if asked."""
+    return [name for name, cls in BUILTINS.items()
+            if (role is None or role in cls.roles) and (not paper_only or name in PAPER_BASELINES)]
 
 
 def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None = None) -> Policy:

@@ -5,6 +5,13 @@
 
 Every checkpoint records :func:`policy_kwargs` in its metadata, so that its networks can be rebuilt
 from pecli's own JSON and the weights alone (nothing in a checkpoint is unpickled).
+
+| name | class | actor |
+| --- | --- | --- |
+| td3, ddpg | Stable-Baselines3 TD3, DDPG | deterministic, Gaussian exploration noise |
+| sac | Stable-Baselines3 SAC | squashed Gaussian; plays its mean |
+| tqc | sb3-contrib TQC (quantile critics) | squashed Gaussian; plays its mean |
+| crossq | sb3-contrib CrossQ (batch renormalisation, no target networks) | squashed Gaussian; plays its mean |
 """
 
 from __future__ import annotations
@@ -13,11 +20,21 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from stable_baselines3 import DDPG, TD3
+import torch as th
+from sb3_contrib import TQC, CrossQ
+from stable_baselines3 import DDPG, SAC, TD3
+from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.noise import NormalActionNoise
+from stable_baselines3.common.type_aliases import DictReplayBufferSamples
+from torch import nn
 
-from pecli.errors import PolicyError
-from pecli.rl.policies import CentralCriticPolicy
+from pecli.errors import PecliError, PolicyError
+from pecli.rl.policies import (
+    CentralCriticCrossQPolicy,
+    CentralCriticPolicy,
+    CentralCriticSACPolicy,
+    CentralCriticTQCPolicy,
+)
 
 if TYPE_CHECKING:
     from pecli.scenario import Training
@@ -43,6 +60,9 @@ class Algorithm:
 ALGORITHMS: dict[str, Algorithm] = {
     "td3": Algorithm("td3", TD3, CentralCriticPolicy),
     "ddpg": Algorithm("ddpg", DDPG, CentralCriticPolicy),
+    "sac": Algorithm("sac", SAC, CentralCriticSACPolicy, stochastic=True),
+    "tqc": Algorithm("tqc", TQC, CentralCriticTQCPolicy, stochastic=True),
+    "crossq": Algorithm("crossq", CrossQ, CentralCriticCrossQPolicy, stochastic=True),
 }
 
 
@@ -55,12 +75,78 @@ def get_algorithm(name: str) -> Algorithm:
 
 def policy_kwargs(training: Training) -> dict[str, Any]:
     """The policy's keyword arguments that ``training`` decides, JSON-able; the feature extractor (the
-    belief) is added by the caller. Recorded in every checkpoint's metadata."""
-    return {"net_arch": list(training.net_arch)}
+    belief) is added by the caller. Recorded in every checkpoint's metadata.
+
+    Arguments an algorithm sets behind the policy's back are spelled out (DDPG's single critic), as are
+    the defaults that decide the networks' shapes (critics, quantiles), so that a later SB3 release
+    with other defaults still rebuilds the same networks.
+    """
+    kwargs: dict[str, Any] = {"net_arch": list(training.net_arch), "n_critics": 1 if training.algo == "ddpg" else 2}
+    if training.algo == "tqc":
+        kwargs["n_quantiles"] = 25
+    return kwargs
 
 
 def algorithm_kwargs(training: Training) -> dict[str, Any]:
     """The algorithm's keyword arguments beyond those all of them share (learning rate, buffer, batch, ...)."""
+    if training.algo == "crossq":  # no target networks, so no tau
+        return {"replay_buffer_class": ConcatDictReplayBuffer}
     if get_algorithm(training.algo).stochastic:
-        return {}
-    return {"action_noise": NormalActionNoise(np.zeros(2), training.action_noise * np.ones(2))}
+        return {"tau": training.tau}
+    return {"tau": training.tau, "action_noise": NormalActionNoise(np.zeros(2), training.action_noise * np.ones(2))}
+
+
+def deterministic_actor(actor: nn.Module) -> nn.Module:
+    """The network from an SB3 actor's features to the action it plays, in [-1, 1]: ``(B, F) -> (B, 2)``.
+
+    TD3's and DDPG's ``mu`` already ends in tanh; a squashed-Gaussian actor (SAC, TQC, CrossQ) plays the
+    tanh of its mean, ``tanh(mu(latent_pi(features)))``, which is SB3's ``predict(deterministic=True)``.
+    """
+    if hasattr(actor, "latent_pi"):
+        return nn.Sequential(actor.latent_pi, actor.mu, nn.Tanh())
+    return actor.mu
+
+
+def torch_device(name: str) -> th.device:
+    """``cpu``, ``cuda`` (or ``cuda:N``) or ``auto`` (CUDA when there is one, as in SB3) as a torch device;
+    :class:`PecliError` for a CUDA device this machine does not have."""
+    if name == "auto":
+        return th.device("cuda" if th.cuda.is_available() else "cpu")
+    try:
+        device = th.device(name)
+    except RuntimeError:
+        raise PecliError(f"unknown device '{name}' (use cpu, cuda or auto)") from None
+    if device.type == "cuda":
+        if not th.cuda.is_available():
+            raise PecliError(f"--device {name}: this machine has no CUDA device that torch can use "
+                             f"(torch {th.__version__}); use --device cpu or auto")
+        if device.index is not None and device.index >= th.cuda.device_count():
+            raise PecliError(f"--device {name}: this machine has {th.cuda.device_count()} CUDA device(s)")
+    elif device.type != "cpu":
+        raise PecliError(f"unsupported device '{name}' (use cpu, cuda or auto)")
+    return device
+
+
+class TensorDict(dict):
+    """A ``dict`` of tensors that ``torch.cat`` concatenates key by key.
+
+    CrossQ passes observations and next observations through its critics in one batch,
+    ``th.cat([obs, next_obs])``, which torch cannot do for ``Dict`` observations; this type answers
+    ``torch.cat`` through torch's ``__torch_function__`` protocol.
+    """
+
+    @classmethod
+    def __torch_function__(cls, func: Any, types: Any, args: tuple = (), kwargs: dict | None = None) -> Any:
+        if func is not th.cat:
+            return NotImplemented
+        parts, *rest = args
+        return cls({key: th.cat([part[key] for part in parts], *rest, **(kwargs or {})) for key in parts[0]})
+
+
+class ConcatDictReplayBuffer(DictReplayBuffer):
+    """SB3's ``DictReplayBuffer`` whose samples' observations are :class:`TensorDict` (for CrossQ)."""
+
+    def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> DictReplayBufferSamples:
+        samples = super()._get_samples(batch_inds, env)
+        return samples._replace(observations=TensorDict(samples.observations),
+                                next_observations=TensorDict(samples.next_observations))

@@ -147,6 +147,8 @@ class FitBelief(BaseCallback):
 
     def update(self) -> float:
         history, target, unseen = self.buffer.sample(self.settings.batch_size)
+        device = self.belief.device  # the fitter runs where the actor's networks are (--device)
+        history, target = history.to(device), target.to(device)
         self.belief.train()
         mixture = self.belief.mixture(history)
         loss = mixture.nll(target)
@@ -157,6 +159,6 @@ class FitBelief(BaseCallback):
         self.logger.record("belief/nll", loss.item())
         if unseen.any():
             with th.no_grad():
-                error = ((mixture.mean() - target) * self.half).norm(dim=1)[th.as_tensor(unseen)].mean()
+                error = ((mixture.mean() - target) * self.half.to(device)).norm(dim=1)[th.as_tensor(unseen, device=device)].mean()
             self.logger.record("belief/unseen_error_m", float(error))
         return loss.item()

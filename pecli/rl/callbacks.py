@@ -1,4 +1,5 @@
-"""SB3 callbacks of a training run: curriculum, episode statistics and progress, evaluation, self-play's pool records and live view."""
+"""SB3 callbacks of a training run: a guard against non-finite learning, curriculum, episode statistics and
+progress, evaluation, self-play's pool records and live view."""
 
 from __future__ import annotations
 
@@ -11,13 +12,61 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch as th
 from rich.console import Group
 from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from stable_baselines3.common.callbacks import BaseCallback
 
+from pecli.errors import PecliError
 from pecli.scenario import Scenario
+
+
+class TrainingDiverged(PecliError):
+    """A loss or a network parameter became NaN or infinite: the model is broken and is not saved."""
+
+
+def non_finite_parameters(module: th.nn.Module) -> int:
+    """How many of ``module``'s parameters hold a NaN or an infinity (0 for a healthy network)."""
+    return sum(int(not th.isfinite(p).all()) for p in module.parameters())
+
+
+class FiniteCheck(BaseCallback):
+    """Stops training with :class:`TrainingDiverged` as soon as a logged loss or a parameter is not finite.
+
+    Put it first in the callback list: the callbacks after it (checkpoints, evaluations) then never see a
+    broken model, and the exception keeps the run from writing its ``final`` checkpoint. Every step it
+    reads the losses of the last update (the logger's ``*loss`` and ``*nll`` values) and the actor's
+    parameters (what plays and is exported; a sum per tensor, which a NaN or an infinity turns
+    non-finite: about 1% of a step); at the end of training, every parameter of the policy.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._params: list[th.Tensor] = []
+
+    def _on_training_start(self) -> None:
+        self._params = list(self.model.policy.actor.parameters())
+
+    def _on_step(self) -> bool:
+        for key, value in self.logger.name_to_value.items():
+            if key.endswith(("loss", "nll")) and not math.isfinite(value):
+                self._stop(f"{key} is {value}")
+        with th.no_grad():
+            healthy = not self._params or bool(th.isfinite(th.stack([p.sum() for p in self._params])).all())
+        if not healthy:
+            self._stop(f"{non_finite_parameters(self.model.policy.actor)} actor parameter tensors hold NaN or inf")
+        return True
+
+    def _on_training_end(self) -> None:
+        if broken := non_finite_parameters(self.model.policy):
+            self._stop(f"{broken} parameter tensors of the policy hold NaN or inf")
+
+    def _stop(self, what: str) -> None:
+        raise TrainingDiverged(
+            f"training diverged at step {self.num_timesteps:,}: {what}; stopped without saving this model "
+            "(lower the learning rate, or check the rewards and reward_scale)")
 
 
 class CurriculumCallback(BaseCallback):
@@ -55,14 +104,15 @@ class CurriculumCallback(BaseCallback):
 
 
 class EpisodeStats(BaseCallback):
-    """Counts finished episodes and captures from the view's ``infos``; logs the recent capture rate.
+    """Counts finished episodes and captures from the view's ``infos`` (from ``episodes`` and ``captures``
+    on); logs the recent capture rate.
 
     ``on_episodes(total)`` is called whenever episodes finish (checkpointing hooks in there).
     """
 
-    def __init__(self, episodes: int = 0, window: int = 100) -> None:
+    def __init__(self, episodes: int = 0, window: int = 100, captures: int = 0) -> None:
         super().__init__()
-        self.episodes = episodes
+        self.episodes, self.captures = episodes, captures
         self.recent: deque[bool] = deque(maxlen=window)
         self.listeners: list[Callable[[int], None]] = []
 
@@ -75,6 +125,7 @@ class EpisodeStats(BaseCallback):
         if finished:
             self.recent.extend(finished)
             self.episodes += len(finished)
+            self.captures += sum(finished)
             self.logger.record("pecli/capture_rate", self.capture_rate)
             self.logger.record("pecli/episodes", self.episodes)
             for listener in self.listeners:
@@ -239,6 +290,9 @@ class PoolTracker(BaseCallback):
             self.captures += int(info["captured"])
         if finished:
             self.logger.record("selfplay/capture_rate", self.capture_rate)
+            for name in {info["opponent"] for info in finished}:  # TensorBoard: the learner's record per opponent
+                episodes, entry_wins = self.per_opponent[name]
+                self.logger.record(f"selfplay/win_rate_vs/{name}", 1.0 - entry_wins / episodes)
             if self.weigh is not None:
                 self.opponent.weights = self.weigh(self.pool)
             for listener in self.listeners:

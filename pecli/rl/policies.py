@@ -1,9 +1,10 @@
-"""A TD3/DDPG policy whose actor and critic read different parts of a ``Dict`` observation.
+"""Policies whose actor and critic read different parts of a ``Dict`` observation.
 
 The actor sees only what the player sees (``obs`` and, with a belief, its features); the critic also sees
 the privileged full ``state`` and the opponent's action ``opp_action``. That is MADDPG's
-centralised critic with decentralised execution, on top of SB3's ``TD3Policy``: only
-``make_critic`` changes, so save/load through SB3's zip format works as usual.
+centralised critic with decentralised execution. :class:`CentralCritic` adds it to any SB3 actor-critic
+policy whose critics are built by ``make_critic``: only the critic's feature extractor changes, so the
+algorithms train, save and load as usual.
 """
 
 from __future__ import annotations
@@ -12,20 +13,25 @@ from collections.abc import Sequence
 from typing import Any
 
 from gymnasium import spaces
+from sb3_contrib.crossq.policies import CrossQPolicy
+from sb3_contrib.tqc.policies import TQCPolicy
+from stable_baselines3.common.policies import BaseModel
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.type_aliases import Schedule
-from stable_baselines3.td3.policies import ContinuousCritic, TD3Policy
+from stable_baselines3.sac.policies import SACPolicy
+from stable_baselines3.td3.policies import TD3Policy
 
 from pecli.rl.extractors import ACTOR_KEYS, CRITIC_KEYS, KeysExtractor
 
 
-class CentralCriticPolicy(TD3Policy):
-    """``TD3Policy`` with a decentralised actor and a centralised critic.
+class CentralCritic:
+    """Mixin for an SB3 policy: a decentralised actor and a centralised critic.
 
     Args:
         actor_keys: observation entries the actor's default extractor reads.
         critic_keys: observation entries the critic reads (with the learner's action appended by SB3).
-        Other arguments are those of ``TD3Policy``; ``features_extractor_class`` sets the actor's extractor.
+        Other arguments are those of the policy it is mixed into; ``features_extractor_class`` sets the
+        actor's extractor.
     """
 
     def __init__(
@@ -43,7 +49,7 @@ class CentralCriticPolicy(TD3Policy):
         self.critic_keys = tuple(critic_keys)
         if features_extractor_class is KeysExtractor:
             features_extractor_kwargs = {"keys": self.actor_keys}
-        super().__init__(
+        super().__init__(  # type: ignore[call-arg]
             observation_space,
             action_space,
             lr_schedule,
@@ -52,12 +58,27 @@ class CentralCriticPolicy(TD3Policy):
             **kwargs,
         )
 
-    def make_critic(self, features_extractor: BaseFeaturesExtractor | None = None) -> ContinuousCritic:
-        extractor = KeysExtractor(self.observation_space, keys=self.critic_keys)
-        critic_kwargs = {**self.critic_kwargs, "features_extractor": extractor, "features_dim": extractor.features_dim}
-        return ContinuousCritic(**critic_kwargs).to(self.device)
+    def make_critic(self, features_extractor: BaseFeaturesExtractor | None = None) -> BaseModel:
+        """The policy's own critic (and target critic) over the critic's keys, whatever extractor SB3 offers."""
+        return super().make_critic(KeysExtractor(self.observation_space, keys=self.critic_keys))  # type: ignore[misc]
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
+        data = super()._get_constructor_parameters()  # type: ignore[misc]
         data.update(actor_keys=self.actor_keys, critic_keys=self.critic_keys)
         return data
+
+
+class CentralCriticPolicy(CentralCritic, TD3Policy):
+    """TD3's and DDPG's policy (``TD3Policy``) with the centralised critic."""
+
+
+class CentralCriticSACPolicy(CentralCritic, SACPolicy):
+    """SAC's policy with the centralised critic; the actor is a squashed Gaussian."""
+
+
+class CentralCriticTQCPolicy(CentralCritic, TQCPolicy):
+    """TQC's policy (quantile critics) with the centralised critic."""
+
+
+class CentralCriticCrossQPolicy(CentralCritic, CrossQPolicy):
+    """CrossQ's policy (batch-renormalised actor and critics, no target networks) with the centralised critic."""

@@ -9,6 +9,8 @@ Three ways to draw (``training.selfplay.opponents``):
              against what still beats it. ``p`` pools the learner's own episodes against the entry
              with a prior worth ``prior_episodes`` episodes: the prediction of a tournament's
              ratings when one rated both, else 0.5.
+``league``   pfsp, with the scripted players (generation 0) keeping ``floor`` of the draws
+             between them whatever their records, so that a learner never forgets them.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from pecli.roles import Role
 from pecli.stats import ELO_SCALE
 
-STRATEGIES = ("latest", "uniform", "pfsp")
+STRATEGIES = ("latest", "uniform", "pfsp", "league")
 MIN_SHARE = 0.02  # (ours) pfsp never starves an entry: each keeps >= 2 % of a uniform draw's share
 
 
@@ -79,6 +81,7 @@ class OpponentPool:
         power: float = 2.0,
         priors: dict[str, float] | None = None,
         prior_episodes: float = 10.0,
+        floor: float = 0.0,
     ) -> np.ndarray:
         """Draw probabilities of the entries under ``strategy``, ``(entries,)``."""
         if not self.entries:
@@ -89,6 +92,11 @@ class OpponentPool:
         elif strategy == "latest":
             newest = max(e.generation for e in self.entries)
             w = np.array([float(e.generation == newest) for e in self.entries])
+        elif strategy == "league":
+            w = self.weights("pfsp", power, priors, prior_episodes)
+            scripted = np.array([e.generation == 0 for e in self.entries], dtype=float)
+            if 0 < scripted.sum() < k:
+                w = (1.0 - floor) * w + floor * scripted / scripted.sum()
         elif strategy == "pfsp":
             priors = priors or {}
             p = np.array([e.win_rate(priors.get(e.name, 0.5), prior_episodes) for e in self.entries])

@@ -1,5 +1,7 @@
-"""Alternating self-play: each round trains the pursuer against the evader pool, then the evader
-against the pursuer pool, and adds each new checkpoint to its side's pool.
+"""Self-play. Alternating (the default): each round trains the pursuer against the evader pool, then the
+evader against the pursuer pool, and adds each new checkpoint to its side's pool. Simultaneous (the
+paper's MADDPG, :mod:`pecli.rl.simultaneous`): each round both learners play each other in the same
+games and both learn every step; their round checkpoints join the pools too (for tournaments).
 
 Both learners live for the whole run: their networks, optimisers and replay buffers carry over
 from round to round. Each side's pool starts with the heuristic baselines. Within a turn, every
@@ -41,21 +43,25 @@ from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
-from pecli.rl.callbacks import CurriculumCallback, PoolTracker, RoundDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, FiniteCheck, PoolTracker, ProgressDisplay, RoundDisplay
 from pecli.rl.pool import OpponentPool, predicted_win_rate
+from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings
+from wrappers.simultaneous import SimultaneousGame
 
 STATE_FILE = "selfplay.json"
+MAIN, EXPLOITER = "main", "exploiter"  # the league's learners: one main and one exploiter per side
 
 
 class SelfPlayInterrupted(Exception):
-    """Self-play stopped (Ctrl-C, SIGTERM) in ``round``, while ``role`` trained; finished turns are saved."""
+    """Self-play stopped (Ctrl-C, SIGTERM) in ``round``, while ``role`` (or both sides) trained; its progress
+    is committed."""
 
-    def __init__(self, round: int, role: Role) -> None:
+    def __init__(self, round: int, role: str) -> None:
         super().__init__(f"round {round}, {role}")
         self.round, self.role = round, role
 
@@ -70,6 +76,7 @@ class SelfPlayJob:
     seed: int = 0
     resume: bool = False
     progress: bool = True
+    device: str = "cpu"  # where the networks train: cpu, cuda or auto
 
 
 @dataclass
@@ -84,6 +91,8 @@ class Turn:
     cpu_seconds: float
     checkpoint: str  # run-relative
     opponents: int  # entries in the opponents' pool during the turn
+    learner: str = MAIN  # main, or exploiter (league)
+    joined: bool = False  # an exploiter's checkpoint joined its side's pool
 
     @property
     def capture_rate(self) -> float:
@@ -99,11 +108,11 @@ class SelfPlayState:
     pools: dict[str, OpponentPool]
     turns: list[Turn] = field(default_factory=list)
 
-    def done(self, round: int, role: Role) -> bool:
-        return any(t.round == round and t.role == role for t in self.turns)
+    def done(self, round: int, role: Role, learner: str = MAIN) -> bool:
+        return any(t.round == round and t.role == role and t.learner == learner for t in self.turns)
 
-    def latest(self, role: Role) -> Turn | None:
-        mine = [t for t in self.turns if t.role == role]
+    def latest(self, role: Role, learner: str = MAIN) -> Turn | None:
+        mine = [t for t in self.turns if t.role == role and t.learner == learner]
         return mine[-1] if mine else None
 
     def to_dict(self) -> dict[str, Any]:
@@ -135,9 +144,15 @@ def read_state(run: Run) -> SelfPlayState:
         raise PecliError(f"{path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
 
 
-def turn_seed(seed: int, round: int, role: Role) -> int:
+def turn_seed(seed: int, round: int, role: Role, kind: str = MAIN) -> int:
     """The seed of one turn: fixed by the run's seed, so a resumed run plays the turns it would have."""
-    return int(np.random.SeedSequence([seed, round, ROLES.index(role)]).generate_state(1)[0] % 2**31)
+    entropy = [seed, round, ROLES.index(role)] + ([1] if kind == EXPLOITER else [])
+    return int(np.random.SeedSequence(entropy).generate_state(1)[0] % 2**31)
+
+
+def _wins(role: Role, stats: EpisodeStats) -> int:
+    """The opponent's wins among the episodes ``stats`` counted for ``role``'s learner."""
+    return stats.episodes - stats.captures if role == "pursuer" else stats.captures
 
 
 def checkpoint_name(round: int) -> str:
@@ -150,7 +165,7 @@ def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
     sp = scenario.training.selfplay
     pools = {role: OpponentPool(role) for role in ROLES}
     for role in ROLES:
-        for name in builtin_names(role):
+        for name in builtin_names(role, paper_only=sp.opponents != "league"):  # a league keeps pecli's adversaries too
             pools[role].add(name, name, generation=0)
     return SelfPlayState(seed=seed, curriculum_steps=sp.rounds * sp.steps_per_round, pools=pools)
 
@@ -158,12 +173,16 @@ def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
 class Learner:
     """One side of self-play: its SB3 model, its batched view, its durable state and the callbacks that outlive a turn."""
 
-    def __init__(self, job: SelfPlayJob, role: Role, placeholder: Policy, run: Run, state: SelfPlayState) -> None:
-        """Build the learner of ``role`` afresh, or from its durable state when it has one."""
-        self.role = role
+    def __init__(self, job: SelfPlayJob, role: Role, placeholder: Policy | None, run: Run, state: SelfPlayState,
+                 view: Any = None, kind: str = MAIN) -> None:
+        """Build the ``kind`` learner of ``role`` (main, or a league's exploiter) afresh, or from its durable
+        state when it has one. It plays against ``placeholder`` (replaced by each turn's pool) or, in the
+        simultaneous schedule, in ``view``."""
+        self.role, self.kind = role, kind
+        self.folder = role if kind == MAIN else f"{EXPLOITER}-{role}"  # where its checkpoints and state go
         self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
-                                  seed=job.seed)
-        self.env = make_env(self.train_job, placeholder, job.seed)
+                                  seed=job.seed, device=job.device)
+        self.env = make_env(self.train_job, placeholder, job.seed, view=view)
         t = job.scenario.training
         self.model = make_model(self.train_job, self.env, run.path / "tb")
         self.callbacks: list[Any] = []
@@ -178,15 +197,18 @@ class Learner:
             if belief.learned and self.env.buffer is not None:
                 self.fit = FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half)
                 self.callbacks.append(self.fit)
-        self.durable = DurableState(run.role_dir(role) / RESUME_DIR)
+        self.durable = DurableState(run.role_dir(self.folder) / RESUME_DIR)
         record = self.durable.read()
+        latest = state.latest(role, kind)
+        if record is not None and latest is not None and latest.joined and record.extra.get("round") == latest.round:
+            record = None  # an exploiter that joined the pool starts afresh; a stop came before it was cleared
         if record is not None:
             self.durable.restore(record, self.model, self.fit)
-        elif state.latest(role) is not None:
+        elif latest is not None and not latest.joined:
             raise PecliError(f"run '{run.name}' was written by an older pecli (its {role} has no {RESUME_DIR}/ state), "
                              "which this one cannot resume; its checkpoints still play (with --trust)")
         else:
-            self.durable.clear()  # what a stop before the first commit left
+            self.durable.clear()  # a fresh learner: what a stop before its first commit left goes
 
     def progress(self, round: int) -> dict[str, Any] | None:
         """The committed progress of the learner's turn in ``round`` (``None`` if it has none)."""
@@ -216,7 +238,8 @@ class SelfPlay:
             self.run_dir = Run.create(job.zoo, job.name, job.scenario, {"command": "selfplay", "seed": job.seed})
             self._save_state()
         self._policies: dict[tuple[Role, str], Policy] = {}
-        self.learners: dict[Role, Learner] = {}
+        self.learners: dict[Role, Learner] = {}  # the main learner of each side
+        self.exploiters: dict[Role, Learner] = {}  # a league's exploiters
 
     # -- pools -------------------------------------------------------------------------------
     def _policy(self, role: Role, spec: str) -> Policy:
@@ -239,7 +262,7 @@ class SelfPlay:
         """PFSP priors: each entry's predicted win rate against the learner's latest checkpoint, from the
         newest tournament under the zoo, when it rated both."""
         latest = self.state.latest(learner)
-        if latest is None or self.settings.opponents != "pfsp":
+        if latest is None or self.settings.opponents not in ("pfsp", "league"):
             return {}
         ratings = tournament_ratings(self.job.zoo)
         mine = ratings.get(str((self.run_dir.path / latest.checkpoint).resolve()))
@@ -255,41 +278,147 @@ class SelfPlay:
 
     def _weigher(self, learner: Role) -> Callable[[OpponentPool], np.ndarray]:
         sp, priors = self.settings, self._priors(learner)
-        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes)
+        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor)
 
     # -- the loop ------------------------------------------------------------------------------
-    def run(self) -> dict[Role, Path]:
+    def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
+        """Play the rounds not yet played; ``after_round(r)`` returning False stops after round ``r``."""
         th.set_num_threads(self.scenario.training.torch_threads)
+        simultaneous = self.settings.schedule == "simultaneous"
+        games = None
+        if simultaneous:
+            beliefs = {role: self.scenario.training.belief != "none" for role in ROLES}
+            games = SimultaneousGame(self.scenario, self.scenario.training.n_envs, self.job.seed, history=beliefs)
+        kinds = (MAIN, EXPLOITER) if self.settings.opponents == "league" else (MAIN,)
         for role in ROLES:
-            self.learners[role] = Learner(self.job, role, self._mixed(opponent_of(role)), self.run_dir, self.state)
+            placeholder = None if simultaneous else self._mixed(opponent_of(role))
+            view = games.faces[role] if games is not None else None
+            self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
+            if EXPLOITER in kinds:
+                self.exploiters[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, kind=EXPLOITER)
         for r in range(1, self.settings.rounds + 1):
-            if all(self.state.done(r, role) for role in ROLES):
+            if all(self.state.done(r, role, kind) for role in ROLES for kind in kinds):
                 continue
-            for role in ROLES:
-                if not self.state.done(r, role):
-                    self._turn(r, role)
+            if games is not None:
+                self._joint_round(r, games)
+            else:
+                for kind in kinds:  # the main agents first: the exploiters then train against the new ones
+                    for role in ROLES:
+                        if not self.state.done(r, role, kind):
+                            self._turn(r, role, kind)
             self.report(self._summary(r))
+            if after_round is not None and not after_round(r):
+                break
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
 
-    def _turn(self, r: int, role: Role) -> None:
-        """Train ``role`` for round ``r``, or the rest of it when its learner committed part of it."""
-        sp, learner = self.settings, self.learners[role]
-        t = self.scenario.training
+    def _joint_round(self, r: int, games: SimultaneousGame) -> None:
+        """Round ``r`` of the simultaneous schedule: both learners in the same games for ``steps_per_round``
+        steps each, or the rest of it when they committed part of it."""
+        sp, t = self.settings, self.scenario.training
+        learners = self.learners
+        progress = {role: learners[role].progress(r) for role in ROLES}
+        for role in ROLES:
+            if progress[role] is None:
+                progress[role] = {"round": r, "start_steps": int(learners[role].model.num_timesteps), "cpu_seconds": 0.0,
+                                  "episodes": 0, "captures": 0}
+        seed = turn_seed(self.state.seed, r, "pursuer")
+        if any(learners[role].model.num_timesteps > progress[role]["start_steps"] for role in ROLES):
+            seed = resume_seed(seed, int(learners["pursuer"].model.num_timesteps))  # resumed inside: games of their own
+        stats = {role: EpisodeStats(episodes=progress[role]["episodes"], captures=progress[role]["captures"])
+                 for role in ROLES}
+        for role in ROLES:
+            model = learners[role].model
+            model.set_env(learners[role].env, force_reset=True)
+            model.set_random_seed(seed)
+        games.next_seed = seed
+        curriculum = learners["pursuer"].curriculum  # one schedule for the shared games, the pursuer's
+        if curriculum is not None:
+            curriculum.apply_to(learners["pursuer"].env, learners["pursuer"].model.num_timesteps)
+        cpu = time.process_time()
+
+        def commit() -> dict[Role, Path]:
+            """Commit both learners' durable states with the round's progress so far."""
+            nonlocal cpu
+            now = time.process_time()
+            share = (now - cpu) / len(ROLES)  # the round's CPU, half to each learner
+            sources = {}
+            for role in ROLES:
+                progress[role].update(cpu_seconds=progress[role]["cpu_seconds"] + share,
+                                      episodes=stats[role].episodes, captures=stats[role].captures)
+                episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role) + stats[role].episodes
+                run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + sum(p["cpu_seconds"] for p in progress.values())
+                learner = learners[role]
+                sources[role] = learner.durable.save(learner.model, learner.fit, episodes, run_cpu, extra=dict(progress[role]))
+            cpu = now
+            return sources
+
+        next_commit = (stats["pursuer"].episodes // t.checkpoint_every + 1) * t.checkpoint_every
+
+        def checkpoint(episodes: int) -> None:
+            nonlocal next_commit
+            if episodes >= next_commit:
+                commit()
+                next_commit = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
+
+        stats["pursuer"].listeners.append(checkpoint)
+        remaining = max(progress[role]["start_steps"] + sp.steps_per_round - int(learners[role].model.num_timesteps)
+                        for role in ROLES)
+        title = f"round {r}/{sp.rounds} · pursuer and evader together (simultaneous)"
+        target = int(learners["pursuer"].model.num_timesteps) + max(remaining, 0)
+        display = ProgressDisplay(stats["pursuer"], target, title, enabled=self.job.progress)
+        callbacks = {
+            "pursuer": [FiniteCheck(), *learners["pursuer"].callbacks, stats["pursuer"], display],
+            "evader": [FiniteCheck()] + [c for c in learners["evader"].callbacks if c is not learners["evader"].curriculum]
+            + [stats["evader"]],
+        }
+        try:
+            if remaining > 0:
+                learn_simultaneously({role: learners[role].model for role in ROLES}, remaining, callbacks)
+            sources = commit()
+            for role in ROLES:
+                other = opponent_of(role)
+                opponent = {"name": f"{other}-learner", "spec": "", "generation": r, "weight": 1.0,
+                            "episodes": stats[role].episodes,
+                            "opponent_wins": _wins(role, stats[role])}
+                self._publish(r, role, sources[role], stats[role].episodes, stats[role].captures, [opponent], 1,
+                              progress[role]["cpu_seconds"])
+            self._save_state()
+        except KeyboardInterrupt:
+            commit()
+            raise SelfPlayInterrupted(r, "both sides") from None
+        finally:
+            for role in ROLES:
+                logger = getattr(learners[role].model, "_logger", None)
+                if logger is not None:
+                    logger.close()
+
+    def _turn(self, r: int, role: Role, kind: str = MAIN) -> None:
+        """Train ``role``'s ``kind`` learner for round ``r``, or the rest of it when it committed part of it.
+        A main learner plays the other side's pool; a league's exploiter the other side's newest main."""
+        sp, t = self.settings, self.scenario.training
+        learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         other = opponent_of(role)
-        pool = self.state.pools[other]
-        if self.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
-            pool.decay(sp.pfsp_decay)
-        weigh = self._weigher(role)
-        mixed = self._mixed(other)
-        mixed.weights = weigh(pool)
-        tracker = PoolTracker(pool, mixed, weigh if sp.opponents == "pfsp" else None)
+        if kind == MAIN:
+            pool = self.state.pools[other]
+            if self.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
+                pool.decay(sp.pfsp_decay)
+            weigh = self._weigher(role)
+            mixed = self._mixed(other)
+            mixed.weights = weigh(pool)
+            tracker = PoolTracker(pool, mixed, weigh if sp.opponents in ("pfsp", "league") else None)
+        else:
+            target = self.state.latest(other)
+            pool = OpponentPool(other)
+            entry = pool.add(f"{other}-r{target.round:03d}", target.checkpoint, generation=target.round)
+            mixed = MixedPolicy(other, [self._policy(other, entry.spec)], [entry.name])
+            tracker = PoolTracker(pool, mixed)
         model = learner.model
         progress = learner.progress(r)
         if progress is None:
             progress = {"round": r, "start_steps": int(model.num_timesteps), "cpu_seconds": 0.0}
         else:  # resumed inside the turn: its records so far
             tracker.restore(progress["tracker"])
-        seed = turn_seed(self.state.seed, r, role)
+        seed = turn_seed(self.state.seed, r, role, kind)
         if model.num_timesteps > progress["start_steps"]:  # new games from a seed of their own
             seed = resume_seed(seed, int(model.num_timesteps))
         learner.env.env_method("set_opponent", mixed)
@@ -306,7 +435,8 @@ class SelfPlay:
             now = time.process_time()
             progress.update(tracker=tracker.to_dict(), cpu_seconds=progress["cpu_seconds"] + now - cpu)
             cpu = now
-            episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role) + tracker.episodes
+            episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role and turn.learner == kind) \
+                + tracker.episodes
             run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + progress["cpu_seconds"]
             return learner.durable.save(model, learner.fit, episodes, run_cpu, extra=dict(progress))
 
@@ -320,49 +450,67 @@ class SelfPlay:
 
         tracker.listeners.append(checkpoint)
         remaining = progress["start_steps"] + sp.steps_per_round - int(model.num_timesteps)
-        title = f"round {r}/{sp.rounds} · {role} vs {len(pool.entries)} {other}s ({sp.opponents})"
-        display = RoundDisplay(tracker, sp.steps_per_round, title, enabled=self.job.progress)
+        what = f"{role} exploiter vs the main {other}" if kind == EXPLOITER else \
+            f"{role} vs {len(pool.entries)} {other}s ({sp.opponents})"
+        display = RoundDisplay(tracker, sp.steps_per_round, f"round {r}/{sp.rounds} · {what}", enabled=self.job.progress)
         try:
             try:
                 if remaining > 0:
-                    model.learn(remaining, callback=CallbackList([*learner.callbacks, tracker, display]),
+                    model.learn(remaining, callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
                                 reset_num_timesteps=False, tb_log_name=role)
             finally:
                 display.close()
                 logger = getattr(model, "_logger", None)
                 if logger is not None:
                     logger.close()
-            self._finish_turn(r, role, tracker, commit)
+            self._finish_turn(r, role, kind, tracker, commit)
         except KeyboardInterrupt:
             commit()
-            raise SelfPlayInterrupted(r, role) from None
+            raise SelfPlayInterrupted(r, role if kind == MAIN else f"{role} exploiter") from None
 
-    def _finish_turn(self, r: int, role: Role, tracker: PoolTracker, commit: Callable[[], Path]) -> None:
-        learner, other = self.learners[role], opponent_of(role)
-        previous = self.state.latest(role)
-        episodes = sum(t.episodes for t in self.state.turns if t.role == role) + tracker.episodes
+    def _finish_turn(self, r: int, role: Role, kind: str, tracker: PoolTracker, commit: Callable[[], Path]) -> None:
+        """The learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
+        the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it.
+        A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games, then starts afresh."""
         weights = dict(zip(tracker.opponent.names, tracker.opponent.weights))
-        meta = replace(
-            checkpoint_meta(learner.train_job, learner.model, episodes),
-            opponent=f"selfplay:{self.settings.opponents}",
-            round=r,
-            parent=previous.checkpoint if previous else "",
-            opponents=[
-                {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
-                 "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
-                for e in self.state.pools[other].entries
-            ],
-        )
-        # the learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
-        # the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it
+        opponents = [
+            {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
+             "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
+            for e in tracker.pool.entries
+        ]
+        lost = sum(o["opponent_wins"] for o in opponents)
+        joined = kind == EXPLOITER and tracker.episodes > 0 and \
+            1 - lost / tracker.episodes >= self.settings.exploiter_join
         source = commit()
-        path = self.run_dir.publish(source, role, checkpoint_name(r), meta)
-        relative = str(path.relative_to(self.run_dir.path))
-        self.state.pools[role].add(f"{role}-r{r:03d}", relative, generation=r)
-        cpu_seconds = learner.durable.record.extra["cpu_seconds"]
-        self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), tracker.episodes, tracker.captures,
-                                     round(cpu_seconds, 2), relative, len(tracker.opponent.names)))
+        learner = self.learners[role] if kind == MAIN else self.exploiters[role]
+        self._publish(r, role, source, tracker.episodes, tracker.captures, opponents, len(tracker.opponent.names),
+                      learner.durable.record.extra["cpu_seconds"], kind, joined)
         self._save_state()
+        if joined:  # AlphaStar's exploiters start again once they join: a new learner, its old state gone
+            self.exploiters[role] = Learner(self.job, role, tracker.opponent, self.run_dir, self.state, kind=EXPLOITER)
+
+    def _publish(self, r: int, role: Role, source: Path, episodes: int, captures: int, opponents: list[dict[str, Any]],
+                 pool_size: int, cpu_seconds: float, kind: str = MAIN, joined: bool = False) -> None:
+        """Make the committed model ``source`` the checkpoint of round ``r`` of ``role``'s ``kind`` learner,
+        add it to its side's pool (a main learner's always, an exploiter's if it ``joined``) and record the
+        turn (the caller saves the state)."""
+        learner = self.learners[role] if kind == MAIN else self.exploiters[role]
+        previous = self.state.latest(role, kind)
+        total = sum(t.episodes for t in self.state.turns if t.role == role and t.learner == kind) + episodes
+        schedule = "simultaneous" if self.settings.schedule == "simultaneous" else self.settings.opponents
+        meta = replace(
+            checkpoint_meta(learner.train_job, learner.model, total),
+            opponent=f"selfplay:{schedule}" + (f"-{EXPLOITER}" if kind == EXPLOITER else ""),
+            round=r,
+            parent=previous.checkpoint if previous and not previous.joined else "",
+            opponents=opponents,
+        )
+        path = self.run_dir.publish(source, learner.folder, checkpoint_name(r), meta)
+        relative = str(path.relative_to(self.run_dir.path))
+        if kind == MAIN or joined:
+            self.state.pools[role].add(f"{learner.folder}-r{r:03d}", relative, generation=r)
+        self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), episodes, captures,
+                                     round(cpu_seconds, 2), relative, pool_size, kind, joined))
 
     def _save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())
@@ -370,10 +518,14 @@ class SelfPlay:
     def _summary(self, r: int) -> str:
         """The line printed after round ``r``."""
         parts = []
-        for role in ROLES:
-            turn = next(t for t in self.state.turns if t.round == r and t.role == role)
+        for turn in (t for t in self.state.turns if t.round == r):
+            role = turn.role
             rate = turn.capture_rate if role == "pursuer" else 1 - turn.capture_rate
             what = "captures" if role == "pursuer" else "escapes"
-            parts.append(f"{role} {what} {rate:.2f} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
+            if turn.learner == MAIN:
+                parts.append(f"{role} {what} {rate:.2f} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
+            else:
+                parts.append(f"{role} exploiter {what} {rate:.2f} vs the main {opponent_of(role)}"
+                             + (" and joins the pool" if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s)"

@@ -26,12 +26,12 @@ from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.durable import DurableState
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, ProgressDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay
 from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs
+from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
-from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run
+from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
@@ -101,6 +101,7 @@ class TrainJob:
     resume: bool = False
     progress: bool = True
     curriculum_steps: int | None = None
+    device: str = "cpu"  # where the networks train: cpu, cuda or auto (checkpoints always load on the CPU)
 
 
 def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float | None = None) -> CheckpointMeta:
@@ -145,11 +146,14 @@ def _obs_dim(scenario: Scenario, role: Role) -> int:
     return ObservationCodec(scenario, role).dim
 
 
-def make_env(job: TrainJob, opponent: Any, seed: int) -> FrozenOpponentVecEnv | BeliefVecEnv:
-    """The batched learner view; with a belief, wrapped so that transitions carry its features."""
+def make_env(job: TrainJob, opponent: Any, seed: int, view: Any = None) -> Any:
+    """The batched learner view against ``opponent`` (or the given ``view``, such as one face of a
+    :class:`~wrappers.simultaneous.SimultaneousGame`); with a belief, wrapped so that transitions
+    carry its features."""
     t = job.scenario.training
     with_belief = t.belief != "none"
-    view = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=with_belief)
+    if view is None:
+        view = FrozenOpponentVecEnv(job.scenario, job.role, opponent, n=t.n_envs, seed=seed, history=with_belief)
     if not with_belief:
         return view
     buffer = None
@@ -173,14 +177,13 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
         buffer_size=t.buffer_size,
         learning_starts=t.learning_starts,
         batch_size=t.batch_size,
-        tau=t.tau,
         gamma=t.gamma,
         train_freq=(t.train_freq, "step"),
         gradient_steps=t.gradient_steps,
         policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
         seed=job.seed,
-        device="cpu",
+        device=torch_device(job.device),
         verbose=0,
         **algorithm_kwargs(t),
     )
@@ -280,7 +283,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
             next_checkpoint = (total // t.checkpoint_every + 1) * t.checkpoint_every
 
     stats.listeners.append(checkpoint)
-    callbacks = [stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
+    callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)
@@ -345,4 +348,4 @@ def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable
 
 def default_run_name(what: str, scenario: Scenario, seed: int) -> str:
     """``<scenario>-<what>-s<seed>-<yyyymmdd-hhmmss>``, ``what`` a role or ``selfplay``."""
-    return f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return safe_run_name(f"{scenario.name}-{what}-s{seed}-{time.strftime('%Y%m%d-%H%M%S')}")

@@ -1,0 +1,165 @@
+"""How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
+
+    python benchmarks/bench_strength.py train --schedules alternating simultaneous league --beliefs none bimdn \\
+        --seeds 0 1 2 --cpu-hours 4 [--config paper] [--steps-per-round 40000] [--zoo runs/bench_strength]
+    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500]
+
+``train`` runs ``pecli selfplay`` for every (schedule, belief, seed), one round at a time (``--resume
+--rounds k``), until the run's recorded CPU time (the sum of its turns') reaches ``--cpu-hours``: so
+every schedule gets the same CPU, whatever a round costs it. Stopping it at any moment is safe; run
+it again to continue (each run resumes from its own durable state).
+
+``report`` takes each run's newest main checkpoints and plays (``pecli.tournament``, cached in
+``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
+(circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
+final evader against pure pursuit. It prints the issue's targets met or missed, the pooled
+two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from pecli.scenario import load_scenario  # noqa: E402
+from pecli.stats import two_proportion_z_test  # noqa: E402
+from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
+
+HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
+ADVERSARIES = ("circler", "blindside", "wall-runner")
+TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
+
+
+def run_name(schedule: str, belief: str, seed: int) -> str:
+    return f"{schedule}-{belief}-s{seed}"
+
+
+def run_cpu_hours(run: Path) -> float:
+    """CPU hours a self-play run has recorded (its finished turns)."""
+    path = run / "selfplay.json"
+    if not path.is_file():
+        return 0.0
+    return sum(t["cpu_seconds"] for t in json.loads(path.read_text())["turns"]) / 3600
+
+
+def rounds_done(run: Path) -> int:
+    path = run / "selfplay.json"
+    return max((t["round"] for t in json.loads(path.read_text())["turns"]), default=0) if path.is_file() else 0
+
+
+def train(args: argparse.Namespace) -> None:
+    for seed in args.seeds:
+        for belief in args.beliefs:
+            for schedule in args.schedules:
+                run = args.zoo / run_name(schedule, belief, seed)
+                while run_cpu_hours(run) < args.cpu_hours:
+                    rounds = rounds_done(run) + 1
+                    if (run / "selfplay.json").is_file():
+                        command = ["selfplay", "--resume", "--name", run.name, "--zoo", str(args.zoo), "--rounds", str(rounds)]
+                    else:
+                        command = ["selfplay", "-c", args.config, "--name", run.name, "--zoo", str(args.zoo), "--rounds", "1",
+                                   "--steps-per-round", str(args.steps_per_round), "--seed", str(seed), "--belief", belief]
+                        command += ["--schedule", "alternating", "--opponents", "league"] if schedule == "league" else \
+                            ["--schedule", schedule]
+                    print(f"$ pecli {' '.join(command)}   # {run_cpu_hours(run):.2f} of {args.cpu_hours} CPU-h", flush=True)
+                    subprocess.run([sys.executable, "-m", "pecli", *command, "--quiet"], check=True)
+
+
+def final_players(zoo: Path, scenario_name: str) -> dict[str, dict[str, Path]]:
+    """Each run's newest main checkpoint per role: ``{run: {role: path}}``."""
+    runs = {}
+    for state in sorted(zoo.glob("*/selfplay.json")):
+        turns = [t for t in json.loads(state.read_text())["turns"] if t.get("learner", "main") == "main"]
+        latest = {t["role"]: state.parent / t["checkpoint"] for t in turns}
+        if len(latest) == 2:
+            runs[state.parent.name] = latest
+    if not runs:
+        sys.exit(f"no finished self-play rounds under {zoo}: run `train` first")
+    return runs
+
+
+def report(args: argparse.Namespace) -> None:
+    runs = final_players(args.zoo, args.config)
+    scenario = load_scenario(args.config)
+    found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
+    by_path = {Path(p.spec).resolve(): p for role in found for p in found[role]}
+    pursuers = {name: by_path[latest["pursuer"].resolve()] for name, latest in runs.items()}
+    evaders = {name: by_path[latest["evader"].resolve()] for name, latest in runs.items()}
+    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
+    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
+    pairings: list[tuple[Player, Player]] = []
+    for name, pursuer in pursuers.items():
+        pairings += [(pursuer, e) for e in scripted.values()]
+        pairings += [(pursuer, evaders[other]) for other in runs if other != name]
+    pairings += [(pure, e) for e in evaders.values()]
+    results = run_tournament(scenario, found, pairings, episodes=args.episodes, seeds=[0], out=args.zoo / "report",
+                             workers=args.workers).grid()
+
+    def rate(p: Player, e: Player) -> tuple[int, int]:
+        r = results[(p.name, e.name)]
+        return r.captures, r.episodes
+
+    print(f"| run | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | cross-play | "
+          f"its evader vs pure pursuit | CPU-h |")
+    print("| --- | --- | --- | ---: | ---: | ---: |")
+    missed = []
+    pooled: dict[str, list[int]] = {}
+    for name, pursuer in pursuers.items():
+        heuristic = [rate(pursuer, scripted[e]) for e in HEURISTIC_EVADERS]
+        adversary = [rate(pursuer, scripted[e]) for e in ADVERSARIES]
+        cross = [rate(pursuer, evaders[o]) for o in runs if o != name]
+        held = rate(pure, evaders[name])
+        cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
+        print(f"| {name} | {' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
+              f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
+              f"{run_cpu_hours(args.zoo / name):.2f} |")
+        missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
+                   if c / n < TARGETS["heuristics"]]
+        missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
+                   if c / n < TARGETS["adversaries"]]
+        if cross and cross_rate < TARGETS["cross-play"]:
+            missed.append(f"{name} cross-play: {cross_rate:.2f} < {TARGETS['cross-play']}")
+        if held[0] / held[1] > TARGETS["pure-pursuit held to"]:
+            missed.append(f"{name}'s evader lets pure pursuit capture {held[0] / held[1]:.2f} > 0.25")
+        belief = name.rsplit("-s", 1)[0].split("-", 1)[-1]  # <schedule>-<belief>-s<seed>
+        totals = pooled.setdefault(belief, [0, 0])
+        for c, n in (*heuristic, *adversary, *cross):
+            totals[0] += c
+            totals[1] += n
+    if "bimdn" in pooled and "none" in pooled:
+        (cb, nb), (cn, nn) = pooled["bimdn"], pooled["none"]
+        p = two_proportion_z_test(cb, nb, cn, nn)
+        better = cb / nb > cn / nn and p < 0.05
+        print(f"\nbimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} pooled over every evader: p = {p:.2g} "
+              f"({'met' if better else 'NOT met'}: bimdn must capture more, p < 0.05)")
+    print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="what", required=True)
+    for name in ("train", "report"):
+        command = sub.add_parser(name)
+        command.add_argument("--config", default="paper")
+        command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    sub.choices["train"].add_argument("--schedules", nargs="+", default=["alternating", "simultaneous", "league"],
+                                      choices=["alternating", "simultaneous", "league"])
+    sub.choices["train"].add_argument("--beliefs", nargs="+", default=["none", "bimdn"])
+    sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    sub.choices["train"].add_argument("--cpu-hours", type=float, default=4.0)
+    sub.choices["train"].add_argument("--steps-per-round", type=int, default=40_000)
+    sub.choices["report"].add_argument("--episodes", type=int, default=500)
+    sub.choices["report"].add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    train(args) if args.what == "train" else report(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,90 @@
+"""pecli's adversarial scripted players: they act in every scenario and do what their exploit says."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import all_scenarios
+from pecli.game import Game
+from pecli.policies import resolve_policy
+from pecli.policies.adversarial import Interceptor, WallRunner
+from pecli.scenario import Scenario
+
+EVADERS = ["circler", "blindside", "wall-runner"]
+
+
+@pytest.mark.parametrize("scenario", all_scenarios(), ids=lambda s: f"{s.name}-{s.observation_frame}")
+def test_every_adversary_acts_in_range_in_every_scenario(scenario: Scenario) -> None:
+    n = 32
+    game = Game(scenario, n=n, seed=0, auto_reset=True)
+    obs = game.reset()
+    for pursuer_name in ("interceptor", "pure-pursuit"):
+        pursuer = resolve_policy(pursuer_name, "pursuer", scenario, seed=1)
+        evaders = [resolve_policy(name, "evader", scenario, seed=2) for name in EVADERS]
+        for policy in (pursuer, *evaders):
+            policy.reset(n)
+        for step in range(40):
+            evader = evaders[step % len(evaders)]
+            pa, ea = pursuer.act(obs["pursuer"]), evader.act(obs["evader"])
+            assert pa.shape == ea.shape == (n, 2) and np.all(np.abs(pa) <= 1) and np.all(np.abs(ea) <= 1)
+            assert np.all(np.isfinite(pa)) and np.all(np.isfinite(ea))
+            result = game.step(pa, ea)
+            for policy in (pursuer, *evaders):
+                policy.reset(n, mask=result.done)
+            obs = result.obs
+
+
+def car_and_mass(paper: Scenario, car: tuple, mass: tuple) -> dict[str, np.ndarray]:
+    """Observations of one game: the car (x, y, steer, speed, yaw) and the point mass (x, y, vx, vy)."""
+    return Game(paper, n=1, seed=0).set_state(np.array([[*car, *mass]], dtype=float))
+
+
+def acceleration(policy_name: str, paper: Scenario, obs: dict[str, np.ndarray], steps: int = 1) -> np.ndarray:
+    policy = resolve_policy(policy_name, "evader", paper, seed=0)
+    policy.reset(1)
+    for _ in range(steps):
+        action = policy.act(obs["evader"])
+    return action[0]
+
+
+def test_the_circler_goes_for_the_centre_of_the_cars_turning_circle(paper: Scenario) -> None:
+    radius = paper.pursuer.wheelbase / np.tan(paper.pursuer.steer_abs_max)  # 0.85 m
+    obs = car_and_mass(paper, (0.0, 0.0, 0.0, 2.0, 0.0), (0.6, 0.4, 0.0, 0.0))  # close, on the car's left
+    action = acceleration("circler", paper, obs)
+    centre = np.array([0.0, radius])
+    wanted = centre - np.array([0.6, 0.4]) + np.array([2.0, 0.0]) / 3.0  # towards it, carried along with the car
+    assert np.dot(action, wanted) / (np.linalg.norm(action) * np.linalg.norm(wanted)) > 0.9
+    far = car_and_mass(paper, (0.0, 0.0, 0.0, 2.0, 0.0), (3.0, 0.0, 0.0, 0.0))  # farther: flees like greedy
+    assert np.allclose(acceleration("circler", paper, far), acceleration("greedy", paper, far))
+
+
+def test_the_blindside_steps_out_of_the_wedge_and_follows_from_behind(paper: Scenario) -> None:
+    ahead = car_and_mass(paper, (0.0, 0.0, 0.0, 2.0, 0.0), (2.0, 0.3, 0.0, 0.0))  # in front, slightly left
+    action = acceleration("blindside", paper, ahead)
+    assert action[1] > 0.5 and action[0] < 0  # sideways, to its own side, and back
+    behind = car_and_mass(paper, (0.0, 0.0, 0.0, 2.0, 0.0), (-3.0, 0.0, 0.0, 0.0))
+    action = acceleration("blindside", paper, behind)
+    assert action[0] > 0.5  # behind the car, it keeps up with it
+
+
+def test_the_wall_runner_runs_along_the_wall_away_from_the_pursuer(paper: Scenario) -> None:
+    hx = paper.arena.half[0] - WallRunner.margin
+    centre = car_and_mass(paper, (5.0, 5.0, 0.0, 0.0, 3.0), (1.0, 0.0, 0.0, 0.0))  # nobody near: to the wall
+    assert acceleration("wall-runner", paper, centre)[0] > 0.5  # the right wall is the nearest
+    chased = car_and_mass(paper, (hx - 1.5, -2.0, 0.0, 2.0, np.pi / 2), (hx, 0.0, 0.0, 0.0))  # car below, same wall
+    action = acceleration("wall-runner", paper, chased)
+    assert action[1] > 0.5 and abs(action[0]) < 0.5  # up the wall, away from it
+    arc = WallRunner._arc(np.array([[hx, 0.0], [0.0, 7.7], [-7.7, 0.0]]), hx, 7.7)
+    assert np.allclose(WallRunner._point(arc, hx, 7.7), [[hx, 0.0], [0.0, 7.7], [-7.7, 0.0]])
+
+
+def test_the_interceptor_leads_a_moving_evader(paper: Scenario) -> None:
+    obs = car_and_mass(paper, (0.0, 0.0, 0.0, 2.0, 0.0), (4.0, 0.0, 0.0, 1.5))  # ahead, crossing to the left
+    lead = resolve_policy("interceptor", "pursuer", paper, seed=0)
+    plain = resolve_policy("pure-pursuit", "pursuer", paper, seed=0)
+    lead.reset(1)
+    plain.reset(1)
+    assert lead.act(obs["pursuer"])[0, 0] > 0.1 and abs(plain.act(obs["pursuer"])[0, 0]) < 1e-6  # it steers left
+    t = Interceptor._time_to_meet(np.array([[4.0, 0.0]]), np.array([[0.0, 1.5]]), 2.5)
+    assert np.linalg.norm([4.0, 1.5 * t[0]]) == pytest.approx(2.5 * t[0])

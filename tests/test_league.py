@@ -1,0 +1,103 @@
+"""The league: main learners against a pool that keeps the scripted players, and exploiters that join it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pecli.errors import ConfigError
+from pecli.rl import selfplay as selfplay_module
+from pecli.rl.pool import OpponentPool
+from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob
+from pecli.rl.train import with_overrides
+from pecli.scenario import Scenario
+from pecli.zoo import read_metadata
+
+TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
+        "checkpoint_every": 5, "selfplay.rounds": 2, "selfplay.steps_per_round": 240, "selfplay.opponents": "league",
+        "selfplay.exploiter_join": 0.05}
+
+
+def job(quick: Scenario, zoo: Path) -> SelfPlayJob:
+    return SelfPlayJob(with_overrides(quick, TINY), zoo, "lg", seed=0, progress=False)
+
+
+def state(run: Path) -> dict:
+    return json.loads((run / "selfplay.json").read_text())
+
+
+def test_the_scripted_players_keep_their_share() -> None:
+    pool = OpponentPool("evader")
+    for name in ("greedy", "circler"):
+        pool.add(name, name, generation=0)
+    for r in (1, 2):
+        pool.add(f"evader-r{r:03d}", f"evader/round-00{r}.zip", generation=r)
+        for _ in range(50):
+            pool.observe(f"evader-r{r:03d}", True)  # the learned evaders beat the learner: pfsp wants only them
+    for _ in range(50):
+        pool.observe("greedy", False)
+        pool.observe("circler", False)
+    pfsp, league = pool.weights("pfsp"), pool.weights("league", floor=0.2)
+    assert pfsp[:2].sum() < 0.05 and league[:2].sum() == pytest.approx(0.2 + 0.8 * pfsp[:2].sum())
+    assert league.sum() == pytest.approx(1.0)
+
+
+def test_a_league_needs_the_alternating_schedule(quick: Scenario) -> None:
+    with pytest.raises(ConfigError, match="needs the alternating schedule"):
+        with_overrides(quick, {"selfplay.opponents": "league", "selfplay.schedule": "simultaneous"})
+
+
+def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: Path) -> None:
+    lines: list[str] = []
+    SelfPlay(job(quick, tmp_path), report=lines.append).run()
+    run = tmp_path / "lg"
+    turns, pools = state(run)["turns"], state(run)["pools"]
+    assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
+        (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter") for role in ("pursuer", "evader")]
+    assert {"circler", "blindside", "wall-runner"} <= {e["name"] for e in pools["evader"]["entries"]}
+    assert "interceptor" in {e["name"] for e in pools["pursuer"]["entries"]}
+    for t in (t for t in turns if t["learner"] == "exploiter"):
+        meta = read_metadata(run / t["checkpoint"])
+        assert t["checkpoint"].startswith(f"exploiter-{t['role']}/")
+        assert [o["name"] for o in meta.opponents] == [f"{'evader' if t['role'] == 'pursuer' else 'pursuer'}-r{t['round']:03d}"]
+        in_pool = any(e["spec"] == t["checkpoint"] for e in pools[t["role"]]["entries"])
+        assert in_pool == t["joined"]  # only an exploiter that beat the main agent joins
+        won = 1 - meta.opponents[0]["opponent_wins"] / max(meta.opponents[0]["episodes"], 1)
+        assert t["joined"] == (meta.opponents[0]["episodes"] > 0 and won >= 0.05)
+    joined = [t for t in turns if t["learner"] == "exploiter" and t["joined"] and t["round"] == 1]
+    assert joined, "no exploiter joined in round 1 (the test expects one with this seed)"
+    for t in joined:  # it started afresh: no parent, and only one round of steps
+        again = read_metadata(run / f"exploiter-{t['role']}" / "round-002.zip")
+        assert again.parent == "" and again.steps == 240
+    assert "exploiter" in lines[0]
+
+
+def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
+    built = {"n": 0}
+    original = selfplay_module.Learner
+
+    class Stopping(original):
+        def __init__(self, *args, **kwargs) -> None:
+            built["n"] += 1
+            if built["n"] == 5:  # after mains and exploiters: the new learner of an exploiter that joined
+                raise KeyboardInterrupt
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(selfplay_module, "Learner", Stopping)
+    with pytest.raises(SelfPlayInterrupted):
+        SelfPlay(job(quick, tmp_path)).run()
+    monkeypatch.undo()
+    run = tmp_path / "lg"
+    joined = [t for t in state(run)["turns"] if t["joined"]]
+    assert len(joined) == 1  # committed, but its learner was not yet replaced
+    resumed = job(quick, tmp_path)
+    resumed.resume = True
+    SelfPlay(resumed).run()
+    role = joined[0]["role"]
+    again = read_metadata(run / f"exploiter-{role}" / "round-002.zip")
+    assert again.parent == "" and again.steps == 240
+    assert len(state(run)["turns"]) == 8
+    assert np.all([t["steps"] > 0 for t in state(run)["turns"]])

@@ -1,0 +1,147 @@
+"""``pecli tune``: a small study runs, reports to the pruner, persists, resumes (also after a killed trial),
+runs trials in parallel processes and reports; bad search spaces are refused in one line."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import optuna
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.rl import tune
+from pecli.rl.search_space import load_space, parse_space
+from pecli.scenario import Scenario, load_scenario
+
+runner = CliRunner()
+pytestmark = pytest.mark.usefixtures("keep_torch_threads")
+SMALL = {
+    "fixed": {"steps": 5000, "learning_starts": 100, "buffer_size": 2000, "batch_size": 32, "n_envs": 4},
+    "parameters": {
+        "algo": {"type": "categorical", "choices": ["td3", "sac"]},
+        "learning_rate": {"type": "float", "low": 1e-4, "high": 1e-3, "log": True},
+        "action_noise": {"type": "float", "low": 0.05, "high": 0.3, "algos": ["td3"]},
+        "net_width": {"type": "categorical", "choices": [16, 32]},
+    },
+}
+FAST = ["--cpu-minutes", "0.01", "--evaluations", "2", "--eval-episodes", "4"]
+
+
+def write_space(folder: Path, data: object) -> Path:
+    path = folder / "space.yaml"
+    path.write_text(data if isinstance(data, str) else yaml.safe_dump(data))
+    return path
+
+
+def finished(study: optuna.Study) -> list[optuna.trial.FrozenTrial]:
+    states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
+    return study.get_trials(states=states)
+
+
+@pytest.mark.filterwarnings("ignore:Heartbeat of storage")
+def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(tune, "HEARTBEAT_S", 1)
+    monkeypatch.setattr(tune, "GRACE_S", 1)
+    space = write_space(tmp_path, SMALL)
+    folder = tmp_path / "tune"
+    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", "--space", str(space), "--trials", "2",
+                                 "--dir", str(folder), *FAST])
+    assert result.exit_code == 0, result.output
+    storage = tune.open_storage(tune.sqlite_url(folder / "studies.db"))
+    study = optuna.load_study(study_name="quick-pursuer", storage=storage)
+    trials = finished(study)
+    assert len(trials) == 2
+    baseline = trials[0]  # the config's own settings, where the space can express them
+    assert baseline.user_attrs["baseline"] and baseline.params["algo"] == "td3"
+    assert baseline.params["learning_rate"] == 5e-4 and baseline.params["action_noise"] == 0.1
+    for trial in trials:  # both evaluations reached Optuna; the last is the score
+        assert sorted(trial.intermediate_values) == [1, 2] and trial.value == trial.intermediate_values[2]
+        assert trial.user_attrs["overrides"]["net_arch"] in ([16, 16], [32, 32])
+        assert ("action_noise" in trial.params) == (trial.params["algo"] == "td3")
+    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--trials", "2", "--dir", str(folder)])
+    assert result.exit_code == 1 and "continue it with --resume" in result.output
+    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--cpu-minutes", "1",
+                                 "--dir", str(folder)])
+    assert result.exit_code == 1 and "keeps its settings (not --cpu-minutes)" in result.output
+
+    killed = study.ask({"algo": optuna.distributions.CategoricalDistribution(["td3", "sac"])})  # its process died
+    storage.record_heartbeat(killed._trial_id)
+    time.sleep(2.5)
+    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--trials", "4",
+                                 "--jobs", "2", "--dir", str(folder)])
+    assert result.exit_code == 0, result.output
+    trials = optuna.load_study(study_name="quick-pursuer", storage=storage).get_trials()
+    assert len(finished(study)) >= 4  # two processes may overshoot by one
+    assert trials[killed.number].state == optuna.trial.TrialState.FAIL  # run again with the same settings:
+    retried = [t for t in trials if t.system_attrs.get("failed_trial") == killed.number]
+    assert len(retried) == 1 and retried[0].params["algo"] == killed.params["algo"]
+    assert retried[0].state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
+
+    result = runner.invoke(app, ["tune", "report", "quick-pursuer", "--dir", str(folder), "--profile",
+                                 str(tmp_path / "tuned.yaml")])
+    assert result.exit_code == 0, result.output
+    assert "Best trials" in result.output
+    assert {"report.md", "space.yaml", "history.png", "intermediate.png"} <= {p.name for p in (folder / "quick-pursuer").iterdir()}
+    assert yaml.safe_load((folder / "quick-pursuer" / "space.yaml").read_text()) == SMALL
+    profile = load_scenario(str(tmp_path / "tuned.yaml"))
+    best = optuna.load_study(study_name="quick-pursuer", storage=storage).best_trial
+    assert profile.name == "tuned" and profile.training.algo == best.params["algo"]
+    assert profile.training.learning_rate == pytest.approx(best.params["learning_rate"])
+    assert profile.fingerprint() == load_scenario("quick").fingerprint()  # the same game
+
+
+def settings(quick: Scenario, what: str = "pursuer", **changes: object) -> tune.TuneSettings:
+    values = {"what": what, "scenario": quick.model_dump(mode="json"), "space": SMALL,
+              "opponent": None if what == "selfplay" else "greedy", "eval_opponents": [] if what == "selfplay" else ["greedy"],
+              "cpu_minutes": 0.01, "evaluations": 2, "eval_episodes": 4}
+    return tune.TuneSettings(**{**values, **changes})
+
+
+def test_evaluations_reach_the_pruner(quick: Scenario, tmp_path: Path) -> None:
+    study = optuna.create_study(direction="maximize", pruner=optuna.pruners.ThresholdPruner(lower=1.5))
+    study.optimize(tune.Objective(settings(quick), tmp_path), n_trials=1)
+    trial = study.trials[0]
+    assert trial.state == optuna.trial.TrialState.PRUNED and list(trial.intermediate_values) == [1]
+
+
+def test_a_selfplay_trial_scores_both_sides_after_each_round(quick: Scenario, tmp_path: Path) -> None:
+    space = {"fixed": {**SMALL["fixed"], "selfplay.rounds": 1, "selfplay.steps_per_round": 200,
+                       "curriculum.enabled": False}, "parameters": {"learning_rate": SMALL["parameters"]["learning_rate"]}}
+    study = optuna.create_study(direction="maximize")
+    study.optimize(tune.Objective(settings(quick, "selfplay", space=space, eval_episodes=2), tmp_path), n_trials=1)
+    trial = study.trials[0]
+    assert trial.state == optuna.trial.TrialState.COMPLETE and list(trial.intermediate_values) == [1]
+    assert 0.0 <= trial.value <= 1.0
+    assert not any(tmp_path.iterdir())  # the trial's self-play run is scratch
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("parameters: {foo: {type: float, low: 0, high: 1}}", "'foo' is not a training setting"),
+    ("parameters: {learning_rate: {type: float, low: 0, high: 1, log: true}}", "log-scaled parameter needs low > 0"),
+    ("parameters: {learning_rate: {type: float, low: 1}}", "needs low < high"),
+    ("parameters: {learning_rate: {type: flot, low: 1, high: 2}}", "parameters.learning_rate.type"),
+    ("parameters: {algo: {type: categorical, choices: [td3, ppo]}}", "parameters.algo = 'ppo'"),
+    ("parameters: {batch_size: {type: int, low: 0, high: 8}}", "parameters.batch_size = 0"),
+    ("parameters: {tau: {type: float, low: 0.1, high: 0.2, algos: [ppo]}}", "parameters.tau.algos"),
+    ("parameters: {}", "parameters"),
+    ("[1, 2]", "a search space is a mapping"),
+    ("parameters: [", "not valid YAML"),
+])
+def test_bad_search_spaces_are_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
+    space = write_space(tmp_path, text)
+    folder = tmp_path / "tune"
+    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", "--space", str(space), "--dir", str(folder)])
+    assert result.exit_code == 1, result.output
+    assert len(result.output.strip().splitlines()) == 1 and message in result.output, result.output
+    assert not folder.exists()
+
+
+def test_the_default_search_space_is_valid_for_every_builtin_config() -> None:
+    for name in ("paper", "quick", "car_vs_car", "point_mass", "robots"):
+        space, text = load_space(None, load_scenario(name))
+        assert "algo" in space.parameters and text.startswith("#")
+    result = runner.invoke(app, ["tune", "space"])
+    assert result.exit_code == 0 and parse_space(yaml.safe_load(result.output), "printed").parameters

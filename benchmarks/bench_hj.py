@@ -324,9 +324,10 @@ def players(args: argparse.Namespace, base: Scenario) -> dict[str, list[tuple[st
     """``(label, spec)`` per role; "chase" stands for the old fallback rule on the default rel4d solution."""
     out = {
         "pursuer": [("hj", "hj"), ("hj rel4d", "hj:model=rel4d"), ("chase", "chase"),
-                    ("pure-pursuit", "pure-pursuit"), ("random-walk", "random-walk")],
+                    ("pure-pursuit", "pure-pursuit"), ("random-walk", "random-walk"), ("interceptor", "interceptor")],
         "evader": [("hj", "hj"), ("hj rel4d", "hj:model=rel4d"), ("chase (flee)", "chase"),
-                   ("greedy", "greedy"), ("random-walk", "random-walk"), ("rash", "rash")],
+                   ("greedy", "greedy"), ("random-walk", "random-walk"), ("rash", "rash"),
+                   ("wall-runner", "wall-runner")],  # circler and blindside flee like greedy from a point mass
     }
     for role, path in (("pursuer", args.pursuer), ("evader", args.evader)):
         if path:
@@ -369,8 +370,26 @@ def matrix(args: argparse.Namespace) -> None:
         for e_label, _ in roster["evader"]:
             cells = [table[f"{p} | {e_label}"] for p in pursuers]
             print(f"| {e_label} | " + " | ".join(f"{r:.3f} ({t:.2f})" for r, t in cells) + " |")
+        print_targets(table, roster)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
+
+
+def print_targets(table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]]) -> None:
+    """Issue 19's targets: the hj pursuer captures at least as often as the best heuristic pursuer against
+    every evader, and the hj evader is caught at most as often as the best heuristic evader by every pursuer."""
+    def heuristic(label: str) -> bool:
+        return not label.startswith(("hj", "learned"))
+
+    print("\n| opponent | hj | best heuristic | target met |\n| --- | ---: | --- | --- |")
+    for e_label, _ in roster["evader"]:
+        best = max((table[f"{p} | {e_label}"][0], p) for p, _ in roster["pursuer"] if heuristic(p))
+        ours = table[f"hj | {e_label}"][0]
+        print(f"| evader {e_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {'yes' if ours >= best[0] else 'no'} |")
+    for p_label, _ in roster["pursuer"]:
+        best = min((table[f"{p_label} | {e}"][0], e) for e, _ in roster["evader"] if heuristic(e))
+        ours = table[f"{p_label} | hj"][0]
+        print(f"| pursuer {p_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {'yes' if ours <= best[0] else 'no'} |")
 
 
 # ---------------------------------------------------------------------- Table II

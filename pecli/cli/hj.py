@@ -22,22 +22,26 @@ app = typer.Typer(
 HJ_CONFIG_HELP = "Scenario with two point masses: a YAML file or a built-in name (point_mass)."
 GridOption = Annotated[
     str | None,
-    typer.Option("--grid", "-g", help="Nodes per position axis and per velocity axis, e.g. 81,21 "
-                 "(default: rel4d 81,21; rel6d 41,11)."),
+    typer.Option("--grid", "-g", help="Nodes per position axis and per velocity axis, e.g. 15,5 "
+                 "(default: abs8d 15,5; rel4d 81,21; rel6d 41,11)."),
 ]
 ModelOption = Annotated[
-    str, typer.Option("--model", "-m", help="rel4d (relative position and velocity) or rel6d (both velocities).")
+    str | None,
+    typer.Option("--model", "-m", help="abs8d (both players in the arena, with its walls; the default), rel4d "
+                 "(relative position and velocity, open plane) or rel6d (relative position, both velocities)."),
 ]
 OrderOption = Annotated[
     str, typer.Option("--order", help="maxmin (the pursuer answers the evader's input) or minmax (the evader answers).")
 ]
 
 
-def _problem(config: str, model: str, grid: str | None, order: str, steps: int | None, backend: str):
-    from pecli.hj.grid import parse_sizes
+def _problem(config: str, model: str | None, grid: str | None, order: str, steps: int | None, backend: str):
+    from pecli.hj.grid import DEFAULT_MODEL, parse_sizes
     from pecli.hj.problem import Problem
     from pecli.scenario import load_scenario
 
+    if model is None:  # hj-reachability solves rel4d only
+        model = "rel4d" if backend == "hj-reachability" else DEFAULT_MODEL
     scenario = load_scenario(config)
     sizes = parse_sizes(grid) if grid is not None else None
     return scenario, Problem.for_scenario(scenario, model, sizes, order, steps, backend)  # type: ignore[arg-type]
@@ -47,7 +51,7 @@ def _problem(config: str, model: str, grid: str | None, order: str, steps: int |
 @user_errors
 def solve(
     config: Annotated[str, typer.Option("--config", "-c", help=HJ_CONFIG_HELP)] = "point_mass",
-    model: ModelOption = "rel4d",
+    model: ModelOption = None,
     grid: GridOption = None,
     order: OrderOption = "maxmin",
     steps: Annotated[int | None, typer.Option("--steps", help="Horizon in game steps (default: the scenario's T).")] = None,
@@ -90,17 +94,17 @@ def solve(
         err_console.print(f"reused {path} (nothing changed; --force solves again)", highlight=False)
     else:
         err_console.print(f"solved in {solution.meta['seconds']:.1f} s, wrote {path}", highlight=False)
-    console.print(f"play it with: {_policy_string(problem, path, out)}", highlight=False)
+    console.print(f"play it with: {_policy_string(problem, path, out, scenario.horizon)}", highlight=False)
 
 
-def _policy_string(problem, path: Path, out: Path | None) -> str:
-    from pecli.hj.grid import DEFAULT_SIZES
+def _policy_string(problem, path: Path, out: Path | None, horizon: int) -> str:
+    from pecli.hj.grid import DEFAULT_MODEL, DEFAULT_SIZES
     from pecli.hj.problem import DEFAULT_ORDER
 
     default = (problem.sizes == DEFAULT_SIZES[problem.model] and problem.order == DEFAULT_ORDER
-               and problem.backend == "numpy" and out is None)
+               and problem.backend == "numpy" and out is None and problem.steps == horizon)
     if default:
-        return "hj" if problem.model == "rel4d" else f"hj:model={problem.model}"
+        return "hj" if problem.model == DEFAULT_MODEL else f"hj:model={problem.model}"
     return f"hj:{path}"
 
 
@@ -111,18 +115,21 @@ def show(
         Path | None, typer.Argument(help="A solution file (.npz); default: the cached default solution of --config.")
     ] = None,
     config: Annotated[str, typer.Option("--config", "-c", help=HJ_CONFIG_HELP)] = "point_mass",
-    model: ModelOption = "rel4d",
+    model: ModelOption = None,
 ) -> None:
     """Print a solution's problem, key and capture share as JSON."""
     from pecli.hj.cache import cache_path
+    from pecli.hj.grid import DEFAULT_MODEL
     from pecli.hj.problem import Problem
     from pecli.hj.solution import Solution
     from pecli.scenario import load_scenario
 
     if solution is None:
+        model = model or DEFAULT_MODEL
         solution = cache_path(Problem.for_scenario(load_scenario(config), model))  # type: ignore[arg-type]
         if not solution.is_file():
-            raise PecliError(f"no cached {model} solution for {config}: run `pecli hj solve --config {config}` first")
+            flag = "" if model == DEFAULT_MODEL else f" --model {model}"
+            raise PecliError(f"no cached {model} solution for {config}: run `pecli hj solve --config {config}{flag}` first")
     console.print_json(json.dumps({**Solution.load(solution).summary(), "path": str(solution)}))
 
 

@@ -329,8 +329,9 @@ class ExperimentRunner:
     def _solved(self, spec: str) -> str:
         """A player string, with an HJ player that would read this machine's solution cache (``hj``,
         ``hj:model=rel6d``) given a solution file in ``out/hj/`` instead, solved there first if needed (a
-        few seconds), so that every node of a cluster reads the same file."""
+        minute and a half for the default model), so that every node of a cluster reads the same file."""
         from pecli.hj.cache import solve_cached
+        from pecli.hj.grid import DEFAULT_MODEL
         from pecli.hj.problem import Problem
         from pecli.policies.hj import parse_options
 
@@ -340,7 +341,7 @@ class ExperimentRunner:
         settings = parse_options(options)
         if "solution" in settings:
             return spec
-        model = settings.pop("model", "rel4d")
+        model = settings.pop("model", DEFAULT_MODEL)
         scenario = self.experiment.scenario
         self._update(f"solving the HJ game ({model})")
         _, path, _ = solve_cached(Problem.for_scenario(scenario, model), scenario.name,  # type: ignore[arg-type]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pecli.hj.problem import Problem
 from pecli.hj.solution import Solution, SolutionError
-from pecli.hj.solver import solve
+from pecli.hj.solver import solve_with_capture_steps
 
 CACHE_VARIABLE = "PECLI_HJ_CACHE"
 
@@ -59,13 +59,14 @@ def solve_cached(
     if not force and (found := cached(problem, path)) is not None:
         return found, path, True
     start = time.perf_counter()
+    steps = None
     if problem.backend == "hj-reachability":
         from pecli.hj.reachability import solve_with_hj_reachability
 
         values = solve_with_hj_reachability(problem)
     else:
-        values = solve(problem, on_step=on_step)
+        values, steps = solve_with_capture_steps(problem, on_step=on_step)
     meta = {"scenario": scenario_name, "seconds": round(time.perf_counter() - start, 3)}
-    solution = Solution(problem=problem, values=values, meta=meta)
+    solution = Solution(problem=problem, values=values, meta=meta, capture_steps=steps)
     solution.save(path)
     return solution, path, False

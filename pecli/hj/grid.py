@@ -1,22 +1,24 @@
-"""The state grid of the relative point-mass game, and multilinear interpolation on it.
+"""The state grid of the point-mass game, and multilinear interpolation on it.
 
-Both models split into an x half and a y half, because a point mass moves along x and y
-independently; only the capture disk couples them. A value array has the shape of the x
-half's axes followed by the y half's, velocities first and the position last in each half
-(the longest axis innermost, which keeps NumPy's inner loops long):
+Every model splits into an x half and a y half, because a point mass moves along x and y
+independently (the walls too act per axis); only the capture disk couples them. A value array
+has the shape of the x half's axes followed by the y half's, velocities first and positions
+last in each half (the longest axes innermost, which keeps NumPy's inner loops long):
 
 ``rel4d``  ``(w_x, r_x, w_y, r_y)``: the evader's velocity and position relative to the pursuer's,
            ``w = v_e - v_p`` (m/s) and ``r = e - p`` (m).
 ``rel6d``  ``(vp_x, ve_x, r_x, vp_y, ve_y, r_y)``: both players' own velocities (m/s), so that each
            player's speed limit applies to its own velocity, and the relative position.
+``abs8d``  ``(vp_x, ve_x, p_x, e_x, vp_y, ve_y, p_y, e_y)``: both players' own velocities and
+           positions in the arena (m), so that the value knows the walls.
 
-Positions span ``±width`` and ``±height`` of the arena (every relative position a game can reach);
-velocities span ``±(v_p + v_e)`` per axis in ``rel4d`` and each player's ``±v_max`` in ``rel6d``.
+Relative positions span ``±width`` and ``±height`` of the arena (every relative position a game can
+reach), absolute ones the arena itself; velocities span ``±(v_p + v_e)`` per axis in ``rel4d`` and
+each player's ``±v_max`` in ``rel6d`` and ``abs8d``.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -25,10 +27,13 @@ import numpy as np
 
 from pecli.errors import ConfigError
 
-Model = Literal["rel4d", "rel6d"]
-MODELS: tuple[Model, ...] = ("rel4d", "rel6d")
+Model = Literal["rel4d", "rel6d", "abs8d"]
+MODELS: tuple[Model, ...] = ("rel4d", "rel6d", "abs8d")
 
-DEFAULT_SIZES: dict[Model, tuple[int, int]] = {"rel4d": (81, 21), "rel6d": (41, 11)}
+DEFAULT_MODEL: Model = "abs8d"
+"""The model ``hj`` and ``pecli hj solve`` use unless told otherwise: the one that knows the walls."""
+
+DEFAULT_SIZES: dict[Model, tuple[int, int]] = {"rel4d": (81, 21), "rel6d": (41, 11), "abs8d": (15, 5)}
 """Nodes per position axis and per velocity axis of each model's default grid."""
 
 
@@ -52,7 +57,7 @@ class Axis:
 
 @dataclass(frozen=True)
 class Grid:
-    """A product grid: the x half's axes, then the y half's (velocities first, the position last in each half)."""
+    """A product grid: the x half's axes, then the y half's (velocities first, positions last in each half)."""
 
     model: Model
     x_axes: tuple[Axis, ...]
@@ -83,6 +88,9 @@ class Grid:
     def points(self, pursuer_pos: np.ndarray, pursuer_vel: np.ndarray, evader_pos: np.ndarray,
                evader_vel: np.ndarray) -> np.ndarray:
         """Grid coordinates ``(n, d)`` of states given as world positions (m) and velocities (m/s), each ``(n, 2)``."""
+        if self.model == "abs8d":
+            return np.stack([pursuer_vel[:, 0], evader_vel[:, 0], pursuer_pos[:, 0], evader_pos[:, 0],
+                             pursuer_vel[:, 1], evader_vel[:, 1], pursuer_pos[:, 1], evader_pos[:, 1]], axis=1)
         r = evader_pos - pursuer_pos
         if self.model == "rel4d":
             w = evader_vel - pursuer_vel
@@ -91,50 +99,58 @@ class Grid:
             columns = (pursuer_vel[:, 0], evader_vel[:, 0], r[:, 0], pursuer_vel[:, 1], evader_vel[:, 1], r[:, 1])
         return np.stack(columns, axis=1)
 
-    def velocity_axes(self, role: str) -> tuple[tuple[int, int], float]:
-        """The axes (x, y) that ``role``'s acceleration moves, and the sign of its effect on them."""
-        if self.model == "rel4d":
-            return (0, 2), (-1.0 if role == "pursuer" else 1.0)
-        return ((0, 3), 1.0) if role == "pursuer" else ((1, 4), 1.0)
-
-    def position_axes(self) -> tuple[int, int]:
-        """The axes of the relative position ``r = e - p`` (x, y)."""
-        return len(self.x_axes) - 1, len(self.axes) - 1
+    def velocity_axes(self, role: str) -> tuple[int, int]:
+        """The axes (x, y) that ``role``'s acceleration moves (in ``rel4d`` both players move ``w``)."""
+        first = 0 if self.model == "rel4d" or role == "pursuer" else 1
+        return first, first + len(self.x_axes)
 
     # ------------------------------------------------------------------ interpolation
     def interpolate(self, values: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Multilinear interpolation of ``values`` (shape :attr:`shape`) at ``points`` ``(n, d)``, clamped to the grid."""
-        lower, weight = self._cells(points)
-        out = np.zeros(points.shape[0])
-        for corner in itertools.product((0, 1), repeat=len(self.axes)):
-            index = tuple(lower[:, k] + c for k, c in enumerate(corner))
-            w = np.prod([weight[:, k] if c else 1.0 - weight[:, k] for k, c in enumerate(corner)], axis=0)
-            out += w * values[index]
-        return out
+        half = len(self.x_axes)
+        return self.interpolate_pairs(values, points[:, None, :half], points[:, None, half:])[:, 0, 0]
 
-    def gradient(self, values: np.ndarray, points: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
-        """Central differences ``(n, len(axes))`` of the interpolated value along ``axes``, one node spacing wide
-        (one-sided at the grid's edges; points outside are moved onto it); units: value per unit of each axis."""
-        out = np.empty((points.shape[0], len(axes)))
-        points = np.clip(points, [a.low for a in self.axes], [a.high for a in self.axes])
-        for j, k in enumerate(axes):
-            axis = self.axes[k]
-            ahead, behind = points.copy(), points.copy()
-            ahead[:, k] = np.minimum(points[:, k] + axis.spacing, axis.high)
-            behind[:, k] = np.maximum(points[:, k] - axis.spacing, axis.low)
-            width = ahead[:, k] - behind[:, k]
-            out[:, j] = (self.interpolate(values, ahead) - self.interpolate(values, behind)) / width
-        return out
+    def interpolate_pairs(self, values: np.ndarray, x_points: np.ndarray, y_points: np.ndarray) -> np.ndarray:
+        """The interpolated value at every pairing of an x half and a y half, game by game.
 
-    def _cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Lower node index ``(n, d)`` of each point's cell and its fractional position in it ``(n, d)``."""
-        lower = np.empty(points.shape, dtype=np.int64)
-        weight = np.empty(points.shape)
-        for k, axis in enumerate(self.axes):
-            u = (np.clip(points[:, k], axis.low, axis.high) - axis.low) / axis.spacing
-            lower[:, k] = np.minimum(np.floor(u), axis.n - 2)
-            weight[:, k] = u - lower[:, k]
-        return lower, weight
+        ``x_points`` ``(n, a, k)`` are x-half coordinates, ``y_points`` ``(n, b, k)`` y-half ones;
+        returns ``(n, a, b)``. The value array is (x half × y half), so one game's ``a × b`` states
+        need one block of it: the x nodes around any of its x halves against the y nodes around any
+        of its y halves. Gathered once, the block is weighted by two small matrix products.
+        """
+        x_nodes, x_weights = self._patch(x_points, self.x_axes)
+        y_nodes, y_weights = self._patch(y_points, self.y_axes)
+        flat = values.reshape(-1)
+        block = flat[(x_nodes * self.half_sizes[1])[:, :, None] + y_nodes[:, None, :]]  # (n, X, Y)
+        return x_weights @ block.astype(x_weights.dtype) @ y_weights.transpose(0, 2, 1)
+
+    @staticmethod
+    def _patch(points: np.ndarray, axes: tuple[Axis, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """The smallest box of one half's nodes that holds the cells of all ``points`` ``(n, a, k)`` of each game,
+        and each point's multilinear weights on it: node indices ``(n, P)`` (flat, C order) and ``(n, a, P)``.
+
+        Points are clamped to the grid. Along each axis the box spans the same number of nodes in
+        every game, the most any game needs; past the grid's end its extra nodes repeat the last one
+        and carry no weight.
+        """
+        n, a = points.shape[:2]
+        nodes = np.zeros((n, 1), dtype=np.int64)
+        weights = np.ones((n, a, 1))
+        for k, axis in enumerate(axes):
+            u = (np.clip(points[:, :, k], axis.low, axis.high) - axis.low) / axis.spacing
+            lower = np.minimum(np.floor(u), axis.n - 2).astype(np.int64)  # (n, a)
+            t = u - lower
+            first = lower.min(axis=1)  # (n,)
+            span = int((lower - first[:, None]).max(initial=0)) + 2
+            local = np.zeros((n, a, span))
+            at = lower - first[:, None]
+            np.put_along_axis(local, at[:, :, None], (1.0 - t)[:, :, None], axis=2)
+            np.put_along_axis(local, at[:, :, None] + 1, t[:, :, None], axis=2)
+            index = np.minimum(first[:, None] + np.arange(span), axis.n - 1)  # (n, span)
+            size = nodes.shape[1] * span
+            nodes = (nodes[:, :, None] * axis.n + index[:, None, :]).reshape(n, size)
+            weights = (weights[:, :, :, None] * local[:, :, None, :]).reshape(n, a, size)
+        return nodes, weights
 
 
 def make_grid(
@@ -155,13 +171,18 @@ def make_grid(
     if n_pos < 3 or n_vel < 3:
         raise ConfigError(f"an HJ grid needs at least 3 nodes per axis, got {n_pos},{n_vel}")
     vp, ve = speed_limits
+    if model == "abs8d":
+        n_vel += 1 - n_vel % 2  # an odd count puts v = 0 on a node: a wall sets the velocity into it to 0
     halves = []
     for label, extent in zip("xy", extents):
         if model == "rel4d":
             axes = [_relative_velocity_axis(f"w_{label}", vp + ve, n_vel, evader_step)]
         else:
             axes = [Axis(f"vp_{label}", -vp, vp, n_vel), Axis(f"ve_{label}", -ve, ve, n_vel)]
-        axes.append(Axis(f"r_{label}", -extent, extent, n_pos))
+        if model == "abs8d":
+            axes += [Axis(f"p_{label}", -extent / 2, extent / 2, n_pos), Axis(f"e_{label}", -extent / 2, extent / 2, n_pos)]
+        else:
+            axes.append(Axis(f"r_{label}", -extent, extent, n_pos))
         halves.append(tuple(axes))
     return Grid(model=model, x_axes=halves[0], y_axes=halves[1])
 

@@ -1,8 +1,8 @@
 """What a Hamilton–Jacobi solution depends on: the game's numbers, the model, the grid, the order, the horizon.
 
-    >>> problem = Problem.for_scenario(load_scenario("point_mass"))      # rel4d, default grid, maxmin, T
+    >>> problem = Problem.for_scenario(load_scenario("point_mass"))      # abs8d, default grid, maxmin, T
     >>> problem.grid.describe(), problem.key()
-    ('23x81x23x81', '...')
+    ('5x5x15x15x5x5x15x15', '...')
 
 Two problems with the same :meth:`Problem.key` have the same solution, so the key names the
 cache file. The scenario's name, sensors, rewards and training settings do not enter it: they
@@ -18,7 +18,7 @@ from functools import cached_property
 from typing import Literal
 
 from pecli.errors import ConfigError
-from pecli.hj.grid import DEFAULT_SIZES, MODELS, Grid, Model, make_grid
+from pecli.hj.grid import DEFAULT_MODEL, DEFAULT_SIZES, MODELS, Grid, Model, make_grid
 from pecli.scenario import PointMassAgent, Scenario
 
 Order = Literal["maxmin", "minmax"]
@@ -26,7 +26,7 @@ ORDERS: tuple[Order, ...] = ("maxmin", "minmax")
 DEFAULT_ORDER: Order = "maxmin"
 Backend = Literal["numpy", "hj-reachability"]
 BACKENDS: tuple[Backend, ...] = ("numpy", "hj-reachability")
-SOLVER_VERSION = 1  # part of every key: bump it when the solver's results change
+SOLVER_VERSION = 2  # part of every key: bump it when the solver's results change
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,8 @@ class Problem:
 
     Attributes:
         game: the game's numbers.
-        model: ``rel4d`` (relative position and velocity) or ``rel6d`` (relative position, both velocities).
+        model: ``abs8d`` (both players' positions and velocities: the walls), ``rel4d`` (relative position
+            and velocity) or ``rel6d`` (relative position, both velocities); see :mod:`pecli.hj.grid`.
         sizes: nodes per position axis and per velocity axis as asked for (``rel4d`` snaps its
             velocity axis, see :mod:`pecli.hj.grid`).
         order: ``maxmin`` (the evader commits first and the pursuer answers) or ``minmax`` (the other way).
@@ -79,8 +80,8 @@ class Problem:
     """
 
     game: PointMassGame
-    model: Model = "rel4d"
-    sizes: tuple[int, int] = DEFAULT_SIZES["rel4d"]
+    model: Model = DEFAULT_MODEL
+    sizes: tuple[int, int] = DEFAULT_SIZES[DEFAULT_MODEL]
     order: Order = DEFAULT_ORDER
     steps: int = 100
     backend: Backend = "numpy"
@@ -103,7 +104,7 @@ class Problem:
     def for_scenario(
         cls,
         scenario: Scenario,
-        model: Model = "rel4d",
+        model: Model = DEFAULT_MODEL,
         sizes: tuple[int, int] | None = None,
         order: Order = DEFAULT_ORDER,
         steps: int | None = None,

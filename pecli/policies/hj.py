@@ -1,26 +1,32 @@
-"""Hamilton–Jacobi players: bang-bang inputs from the gradient of a solved value function.
+"""Hamilton–Jacobi players: each step, the input whose outcomes the solved value function rates best.
 
-The value ``V`` (:mod:`pecli.hj`) is the closest approach, minus the capture distance, the pursuer
-can force. Each step a player locates the current state on the solution's grid and reads the
-gradient of ``V`` along its own velocity (central differences of the interpolated value, one
-node apart). One step of its acceleration ``a`` changes ``V`` by about ``gradient · a dt``, so the
-pursuer (which minimises) takes ``a = -a_max sign(...)`` and the evader ``+a_max sign(...)`` per axis.
-
-Where the gradient vanishes (``|∂V/∂v| ≤ 1e-3 s`` on both axes; for example when the players
-separate, so that the closest approach is now and no input changes it, or where the horizon
-reaches no capture) the player uses the gradient along the relative position instead, which points
-along ``r``: the pursuer accelerates towards the evader, the evader away from the pursuer. An axis
-whose component is exactly zero gets no input.
+A solution (:mod:`pecli.hj`) rates every state with a **score**
+(:meth:`~pecli.hj.solution.Solution.scores`): the fewest steps in which the pursuer forces a
+capture, or, where it cannot within the solution's horizon, the horizon plus one plus the closest
+approach (m) it can force. Each step a player plays the game's own step
+(:class:`~pecli.game.dynamics.PointMassDynamics`, walls included) for its nine inputs
+``{-1, 0, 1}²`` against the opponent's nine, reads the score of each of the 81 outcomes (an outcome
+that is a capture scores -1), averages it over the opponent's inputs, and takes the input with the
+lowest average (the pursuer) or the highest (the evader). Averages within :data:`TIE` of the best
+are ties, which the average distance one step after the outcome decides: the pursuer closes in,
+the evader draws away. That is also the whole rule where the score is flat, for example where
+the value cannot tell the inputs apart in the open plane of a relative model.
 
 The state needs the opponent's position and velocity. While the opponent is seen they come from
 the observation. When it is not, the policy uses an estimate: the last sighting moved at its last
 velocity (stopping at walls as the game does), or, with a belief checkpoint, the position the
 belief's mixture mean gives (the paper's choice, "BiMDN weighted mean") with the last sighting's
 velocity. Before the first sighting, without a belief, the estimate is the arena's centre, at rest.
+An estimate within the player's own sensing range is moved out to the range's edge (the player
+would see the opponent there). The value is that of the full-information game, so it rates
+outcomes only while both players see each other; otherwise (an estimate, or an opponent that
+cannot see this player) only the distance decides. See ``docs/hj.md`` for the measurements
+behind each rule.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +36,7 @@ from pecli.errors import ConfigError, PolicyError
 from pecli.game.dynamics import PointMassDynamics
 from pecli.game.observation import Decoded
 from pecli.hj.cache import cache_dir, cache_path
+from pecli.hj.grid import DEFAULT_MODEL
 from pecli.hj.problem import Problem
 from pecli.hj.solution import Solution, SolutionError
 from pecli.io import file_digest
@@ -37,15 +44,22 @@ from pecli.policies.base import HeuristicPolicy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario
 
-FLAT_GRADIENT = 1e-3  # s: |dV/dv| below this on both axes counts as no gradient
-DEAD_BAND = 0.0  # share of the larger |dV/dv| below which an axis gets no input; a 5 % band was tried
-                 # and made the HJ evader much weaker (docs/hj.md), so only an exact zero gets none
+LEVELS = np.array([-1.0, 0.0, 1.0])  # normalised input per axis; the candidates are their 3 x 3 pairs
+INPUTS = np.array([(x, y) for x in LEVELS for y in LEVELS])  # (9, 2), row 3 i + j = (LEVELS[i], LEVELS[j])
+TIE = 1e-3  # score differences below this are ties (steps, or m of closest approach)
+CAPTURED = -1.0  # the score of an outcome that is a capture: better than any state
 
 
-def bang_bang(drive: np.ndarray) -> np.ndarray:
-    """Full input ``sign(drive)`` ``(n, 2)`` on each axis, except axes at or under :data:`DEAD_BAND` of the larger one."""
-    larger = np.max(np.abs(drive), axis=1, keepdims=True)
-    return np.where(np.abs(drive) > DEAD_BAND * larger, np.sign(drive), 0.0)
+def _pair_norm(gap: np.ndarray) -> np.ndarray:
+    """``(n, px, ex, py, ey)`` distances from per-axis gaps ``(3 pursuer inputs, 3 evader inputs, 2 axes, n)``."""
+    return np.hypot(gap[:, :, 0].transpose(2, 0, 1)[:, :, :, None, None], gap[:, :, 1].transpose(2, 0, 1)[:, None, None])
+
+
+def choose(scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
+    """Per game, the candidate ``(n,)`` with the lowest score ``(n, k)``; scores within :data:`TIE` of the lowest
+    are ties, and the lowest distance ``(n, k)`` among them wins."""
+    tied = scores <= scores.min(axis=1, keepdims=True) + TIE
+    return np.argmin(np.where(tied, distances, np.inf), axis=1)
 
 
 class HJPolicy(HeuristicPolicy):
@@ -82,12 +96,11 @@ class HJPolicy(HeuristicPolicy):
             raise PolicyError(str(exc)) from None
         self.solution = solution
         self.grid = solution.grid
+        self.scores = solution.scores()
         self.belief = belief
-        self.opponent = PointMassDynamics(scenario.agent(opponent_of(role)))  # type: ignore[arg-type]
+        self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
+        self.opponent = self.dynamics[opponent_of(role)]
         self.half = np.array(scenario.arena.half)
-        self.a_goal = -1.0 if role == "pursuer" else 1.0  # the pursuer lowers V, the evader raises it
-        self.velocity_axes, self.velocity_sign = self.grid.velocity_axes(role)
-        self.position_sign = -1.0 if role == "pursuer" else 1.0  # r = e - p
         self.identity = f"hj:{solution.key}" + (f":belief:{belief_id}" if belief is not None else "")
 
     # ------------------------------------------------------------------ memory
@@ -102,6 +115,11 @@ class HJPolicy(HeuristicPolicy):
         if self.belief is not None:
             self.belief.reset(n, mask, seed)
 
+    def end(self, mask: np.ndarray) -> None:
+        """The games in ``mask`` have ended: a belief's network skips them (the policy itself is cheap)."""
+        if self.belief is not None:
+            self.belief.end(mask)
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs)
         if self.belief is not None and obs.ndim == 2 and obs.shape[1] == self.codec.dim:
@@ -113,24 +131,58 @@ class HJPolicy(HeuristicPolicy):
     # ------------------------------------------------------------------ acting
     def _act(self, view: Decoded) -> np.ndarray:
         opp_pos, opp_vel = self._estimate(view)
-        # The input changes the velocity after this step's move: V(r, w) = opt V(r + w dt, w + dw), so the
-        # value's velocity gradient is read where the positions will be after the move.
-        dt = self.scenario.dt
-        own_next, opp_next = view.own_pos + dt * view.own_vel, opp_pos + dt * opp_vel
-        if self.role == "pursuer":
-            points = self.grid.points(own_next, view.own_vel, opp_next, opp_vel)
-        else:
-            points = self.grid.points(opp_next, opp_vel, own_next, view.own_vel)
-        return self.inputs(points)
+        own = np.concatenate([view.own_pos, view.own_vel], axis=1).T  # (4, n) rows s_x, s_y, v_x, v_y
+        opp = np.concatenate([opp_pos, opp_vel], axis=1).T
+        pursuer, evader = (own, opp) if self.role == "pursuer" else (opp, own)
+        scores, distances = self.outcomes(pursuer, evader)
+        scores[~self._mutual(view)] = 0.0  # only the distance decides (see the module)
+        if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
+            return INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))]
+        return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
 
-    def inputs(self, points: np.ndarray) -> np.ndarray:
-        """Normalised accelerations ``(n, 2)`` in {-1, 0, 1} at grid coordinates ``points`` ``(n, d)``."""
-        axes = (*self.velocity_axes, *self.grid.position_axes())
-        gradient = self.grid.gradient(self.solution.values, points, axes)
-        drive = self.a_goal * self.velocity_sign * gradient[:, :2]
-        flat = np.max(np.abs(drive), axis=1) <= FLAT_GRADIENT
-        drive[flat] = self.a_goal * self.position_sign * gradient[flat, 2:]
-        return bang_bang(drive)
+    def outcomes(self, pursuer: np.ndarray, evader: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Scores after one step and distances (m) one step later still, ``(n, 9, 9)`` each: pursuer input ×
+        evader input (rows of :data:`INPUTS`), from both players' states ``(4, n)`` (s_x, s_y, v_x, v_y; SI).
+
+        The distance is taken a step after the outcome, at the velocities the inputs gave, because
+        the positions after one step follow from the current velocities alone: it tells how an
+        input opens or closes the gap, which breaks ties of the score.
+
+        A point mass moves along x and y independently, so three steps per player (the inputs
+        ``(u, u)``, ``u`` in :data:`LEVELS`) give every outcome, and its x half depends only on the
+        two players' x inputs: the 81 outcomes are the 9 × 9 pairings of 9 x halves with 9 y halves.
+        """
+        n, dt, half = pursuer.shape[1], self.scenario.dt, len(self.grid.x_axes)
+        moved = {}
+        for role, state in (("pursuer", pursuer), ("evader", evader)):
+            dynamics = self.dynamics[role]
+            steps = [dynamics.step(state, np.full((n, 2), u), dt) for u in LEVELS]
+            for step in steps:
+                dynamics.stop_at_walls(step, *self.half)
+            moved[role] = np.stack(steps)  # (3, 4, n)
+        p, e = moved["pursuer"][:, None], moved["evader"][None, :]  # (3 pursuer, 3 evader, 4, n)
+        points = self.grid.points(*(np.broadcast_to(rows, (3, 3, 2, n)).transpose(0, 1, 3, 2).reshape(-1, 2)
+                                    for rows in (p[:, :, 0:2], p[:, :, 2:4], e[:, :, 0:2], e[:, :, 2:4])))
+        points = points.reshape(3, 3, n, -1).transpose(2, 0, 1, 3).reshape(n, 9, -1)  # (n, 3 i + j, d)
+        scores = self.grid.interpolate_pairs(self.scores, points[:, :, :half], points[:, :, half:])
+        gap = e[:, :, 0:2] - p[:, :, 0:2]  # (3, 3, 2, n): per axis, depends on that axis's inputs only
+        ahead = gap + (e[:, :, 2:4] - p[:, :, 2:4]) * dt  # one more step at the new velocities
+        scores = scores.reshape(n, 3, 3, 3, 3)
+        scores[_pair_norm(gap) <= self.scenario.capture_distance] = CAPTURED
+        order = (0, 1, 3, 2, 4)  # (n, px, py, ex, ey): pursuer input 3 px + py, evader input 3 ex + ey
+        return scores.transpose(order).reshape(n, 9, 9), _pair_norm(ahead).transpose(order).reshape(n, 9, 9)
+
+    def _mutual(self, view: Decoded) -> np.ndarray:
+        """``(n,)`` bool: the games in which both players see each other, the full-information game the value solves.
+
+        This player's sensor says whether it sees the opponent; the opponent's (a disk, the opponent
+        being a point mass) whether it can see this player, from the seen opponent's distance.
+        Where this player sees nothing the state is an estimate; where only this player sees, the
+        opponent plays blind. Either way the value's assumption fails and only the distance decides.
+        """
+        gap = view.opp_pos - view.own_pos
+        in_range = np.hypot(gap[:, 0], gap[:, 1]) <= self.opponent.params.sensor.range + 1e-3  # float32 slack
+        return view.seen & in_range
 
     def _estimate(self, view: Decoded) -> tuple[np.ndarray, np.ndarray]:
         """The opponent's position and velocity ``(n, 2)`` each: observed, or estimated where unseen."""
@@ -141,12 +193,32 @@ class HJPolicy(HeuristicPolicy):
             moved = self.opponent.step(state, np.zeros((state.shape[1], 2)), self.scenario.dt)
             self.opponent.stop_at_walls(moved, *self.half)
             state[:, unseen] = moved[:, unseen]
+            state[0:2, unseen] = self._out_of_sight(view, state[0:2].T)[unseen].T
         state[0:2, seen] = view.opp_pos[seen].T
         state[2:4, seen] = view.opp_vel[seen].T
         position = state[0:2].T.copy()
         if self.belief is not None and unseen.any():
-            position[unseen] = self._belief_mean()[unseen]
+            position[unseen] = self._out_of_sight(view, self._belief_mean())[unseen]
         return position, state[2:4].T.copy()
+
+    def _out_of_sight(self, view: Decoded, estimate: np.ndarray) -> np.ndarray:
+        """``estimate`` ``(n, 2)`` where the player's own sensor allows an unseen opponent to be.
+
+        An estimate within sensing range of a player that sees nothing is wrong, so it moves out
+        along the line from the player to the range's edge (along the player's velocity, or +x,
+        when it sits on the player), and into the arena. Chasing it sweeps the pursuer onwards.
+        """
+        offset = estimate - view.own_pos
+        distance = np.hypot(offset[:, 0], offset[:, 1])
+        inside = distance < self.params.sensor.range
+        if not inside.any():
+            return estimate
+        speed = np.hypot(view.own_vel[:, 0], view.own_vel[:, 1])
+        fallback = np.where(speed[:, None] > 1e-6, view.own_vel, [1.0, 0.0])
+        direction = np.where(distance[:, None] > 1e-6, offset, fallback)
+        direction /= np.hypot(direction[:, 0], direction[:, 1])[:, None]
+        edge = np.clip(view.own_pos + self.params.sensor.range * direction, -self.half, self.half)
+        return np.where(inside[:, None], edge, estimate)
 
     def _belief_mean(self) -> np.ndarray:
         """The belief's mixture mean ``(n, 2)`` in metres (world frame)."""
@@ -179,34 +251,48 @@ def load_hj_policy(options: str, role: Role, scenario: Scenario, seed: int | Non
     """The HJ policy for ``role`` from a policy string's options (the part after ``hj:``; may be empty).
 
     Without a solution file it uses the cached solution of the scenario's default problem for
-    ``model`` (default ``rel4d``), and says how to make it if there is none.
+    ``model`` (default ``abs8d``), and says how to make it if there is none.
     """
     settings = parse_options(options)
     if "solution" in settings:
         path = Path(settings["solution"])
         try:
-            solution = Solution.load(path)
+            solution = _load(path)
         except SolutionError as exc:
             raise PolicyError(str(exc)) from None
     else:
-        model = settings.get("model", "rel4d")
+        model = settings.get("model", DEFAULT_MODEL)
         try:
             problem = Problem.for_scenario(scenario, model)  # type: ignore[arg-type]
         except ConfigError as exc:  # a scenario without two point masses
             raise PolicyError(str(exc)) from None
         path = cache_path(problem)
-        try:
-            solution = Solution.load(path)
-        except SolutionError:
-            flag = "" if model == "rel4d" else f" --model {model}"
+        flag = "" if model == DEFAULT_MODEL else f" --model {model}"
+        if not path.is_file():
             raise PolicyError(
                 f"no HJ solution for scenario '{scenario.name}' ({problem.describe()}) in {cache_dir()}: "
                 f"run `pecli hj solve --config <this scenario>{flag}` first, or give a file: hj:FILE.npz"
-            ) from None
+            )
+        try:
+            solution = _load(path)
+        except SolutionError as exc:  # a damaged file; solving again replaces it
+            raise PolicyError(f"{exc} (`pecli hj solve --config <this scenario>{flag}` does)") from None
     if "belief" not in settings:
         return HJPolicy(scenario, role, solution, seed=seed)
     belief = _belief_policy(settings["belief"], role, scenario)
     return HJPolicy(scenario, role, solution, belief=belief, belief_id=file_digest(settings["belief"]), seed=seed)
+
+
+def _load(path: Path) -> Solution:
+    """:meth:`Solution.load`, kept for the next call while the file is unchanged: a tournament's or a match's
+    two HJ players share one copy of the (large) arrays."""
+    stat = path.stat() if path.is_file() else None
+    return _load_once(path.resolve(), stat.st_mtime_ns if stat else 0, stat.st_size if stat else 0)
+
+
+@functools.lru_cache(maxsize=2)
+def _load_once(path: Path, mtime_ns: int, size: int) -> Solution:
+    return Solution.load(path)
 
 
 def _belief_policy(path: str, role: Role, scenario: Scenario) -> Any:

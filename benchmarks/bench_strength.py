@@ -9,6 +9,12 @@
 every schedule gets the same CPU, whatever a round costs it. Stopping it at any moment is safe; run
 it again to continue (each run resumes from its own durable state).
 
+The same runs as one Ray experiment (2 at a time here, as many as a cluster has cores), each to the same
+CPU budget, then the same report::
+
+    pecli experiment run strength --out runs/strength [--address auto]
+    python benchmarks/bench_strength.py report --zoo runs/strength/zoo
+
 ``report`` takes each run's newest main checkpoints and plays (``pecli.tournament``, cached in
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
 (circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
@@ -24,6 +30,8 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+
+import yaml
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -128,11 +136,18 @@ def report(args: argparse.Namespace) -> None:
             missed.append(f"{name} cross-play: {cross_rate:.2f} < {TARGETS['cross-play']}")
         if held[0] / held[1] > TARGETS["pure-pursuit held to"]:
             missed.append(f"{name}'s evader lets pure pursuit capture {held[0] / held[1]:.2f} > 0.25")
-        belief = name.rsplit("-s", 1)[0].split("-", 1)[-1]  # <schedule>-<belief>-s<seed>
-        totals = pooled.setdefault(belief, [0, 0])
-        for c, n in (*heuristic, *adversary, *cross):
-            totals[0] += c
-            totals[1] += n
+        training = yaml.safe_load((args.zoo / name / "config.yaml").read_text())["training"]
+        selfplay = training.get("selfplay", {})
+        schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
+        for group in (training["belief"], f"schedule {schedule}"):
+            totals = pooled.setdefault(group, [0, 0])
+            for c, n in (*heuristic, *adversary, *cross):
+                totals[0] += c
+                totals[1] += n
+    print("\npursuers pooled over every evader (heuristics, adversaries, cross-play), per schedule at equal CPU:")
+    for group, (c, n) in sorted(pooled.items()):
+        if group.startswith("schedule "):
+            print(f"- {group[9:]}: {c / n:.3f} over {n} episodes")
     if "bimdn" in pooled and "none" in pooled:
         (cb, nb), (cn, nn) = pooled["bimdn"], pooled["none"]
         p = two_proportion_z_test(cb, nb, cn, nn)

@@ -90,6 +90,54 @@ def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
     assert result.exit_code == 1 and "holds no experiment" in result.output
 
 
+def test_self_play_schedules_and_a_cpu_budget_in_the_grid(tmp_path: Path) -> None:
+    grid = {**SMOKE["runs"], "schedules": ["selfplay", "simultaneous", "league", "pursuer"], "cpu_hours": 2}
+    runs = {run.name: run for run in experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()}
+    assert list(runs) == ["none-s0", "none-simultaneous-s0", "none-league-s0", "none-pursuer-s0"]
+    settings = {name: (run.scenario.training.selfplay.schedule, run.scenario.training.selfplay.opponents, run.roles,
+                       run.cpu_hours) for name, run in runs.items()}
+    assert settings["none-simultaneous-s0"][0] == "simultaneous"
+    assert settings["none-league-s0"][:2] == ("alternating", "league")
+    assert settings["none-league-s0"][2] == ("pursuer", "evader") and settings["none-league-s0"][3] == 2
+    assert settings["none-pursuer-s0"][2:] == (("pursuer",), None)  # a one-role run has its own budget (steps)
+    for bad, message in ((0, "greater than 0"), (float("inf"), "finite number"), ("two", "valid number")):
+        with pytest.raises(ConfigError, match=message):
+            experiment_from_dict({**SMOKE, "runs": {**grid, "cpu_hours": bad}}, "exp.yaml")
+
+
+@pytest.mark.parametrize("schedule", ["selfplay", "league"])
+def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path, schedule: str) -> None:
+    """A run whose budget is spent in round 1 stops there, well below its ceiling of 3 rounds, and a second
+    call (a retried task) does nothing."""
+    from pecli.experiment.runs import execute_run
+
+    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+            "runs": {**SMOKE["runs"], "rounds": 3, "schedules": [schedule], "cpu_hours": 1e-6}}
+    (run,) = experiment_from_dict(data, "exp.yaml").runs()
+    first = execute_run(run, tmp_path)
+    assert first["did"] == "started" and first["progress"]["done"] and first["progress"]["round"] == 1
+    turns = json.loads((tmp_path / run.name / SELFPLAY_STATE).read_text())["turns"]
+    assert {t["round"] for t in turns} == {1}
+    assert {t.get("learner", "main") for t in turns} == ({"main", "exploiter"} if schedule == "league" else {"main"})
+    assert execute_run(run, tmp_path)["did"] == "finished"
+
+
+def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:
+    from pecli.experiment.pipeline import keep_best
+    from pecli.scenario import load_scenario
+    from pecli.tournament import PairingResult, Player, TournamentResults
+
+    grid = {**SMOKE["runs"], "schedules": ["league"]}
+    (run,) = experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()
+    main = Player("main", f"zoo/{run.name}/pursuer/round-001.zip", "pursuer", "a")
+    exploiter = Player("exploiter", f"zoo/{run.name}/exploiter-pursuer/round-001.zip", "pursuer", "b")
+    evader = Player("evader", f"zoo/{run.name}/evader/round-001.zip", "evader", "c")
+    pairings = [PairingResult("main", "evader", 10, 2, 0.5, 0.1), PairingResult("exploiter", "evader", 10, 9, 0.5, 0.1)]
+    results = TournamentResults(load_scenario("quick"), {"pursuer": [main, exploiter], "evader": [evader]}, pairings,
+                                [], 10, [0])
+    assert keep_best(results, [run], keep=1)[run.name] == {"pursuer": [main.spec], "evader": [evader.spec]}
+
+
 # -- on Ray ---------------------------------------------------------------------------------------------
 
 def ray_processes(group: int | None = None) -> list[str]:

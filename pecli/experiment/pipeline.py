@@ -370,7 +370,9 @@ def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dic
     kept: dict[str, dict[str, list[str]]] = {run.name: {} for run in runs}
     for run in runs:
         for role in run.roles:
-            mine = [p for p in results.players[role] if Path(p.spec).parent.parent.name == run.name and p.name in scores]
+            mine = [p for p in results.players[role]  # the run's main agents (a league's exploiters only train them)
+                    if Path(p.spec).parent.parent.name == run.name and Path(p.spec).parent.name == role
+                    and p.name in scores]
             rate = {p.name: sum(c for c, _ in scores[p.name]) / sum(n for _, n in scores[p.name]) for p in mine}
             best = sorted(mine, key=lambda p: (-rate[p.name] if role == "pursuer" else rate[p.name], p.name))
             kept[run.name][role] = [by_name[p.name].spec for p in best[:keep]]

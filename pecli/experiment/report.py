@@ -17,7 +17,7 @@ from typing import Any
 
 from pecli.errors import PecliError
 from pecli.experiment.pipeline import KEPT_FILE, open_experiment
-from pecli.experiment.spec import LoadedExperiment
+from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role
@@ -172,7 +172,10 @@ class ExperimentReport:
         spec, grid = self.experiment.spec, self.experiment.spec.runs
         budget = (f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
                   f"{grid.steps_per_round or self.experiment.scenario.training.selfplay.steps_per_round:,} "
-                  "transitions per side" if "selfplay" in grid.schedules else f"{grid.steps or '-'} transitions")
+                  "transitions per side" if set(grid.schedules) & set(SELFPLAY_SCHEDULES)
+                  else f"{grid.steps or '-'} transitions")
+        if grid.cpu_hours is not None:
+            budget += f" at most, or {grid.cpu_hours:g} CPU-hours per self-play run"
         title = {"I": "Table I", "II": "Table II"}.get(self.table, "results")
         lines = [
             f"# {spec.name}: {title}",

@@ -53,7 +53,7 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     records = {role: _read_json(folder / role / RESUME_DIR / DURABLE_RECORD) for role in run.roles}
     steps = sum(int(r.get("steps", 0)) for r in records.values() if r)
     cpu = max((float(r.get("cpu_seconds", 0.0)) for r in records.values() if r), default=0.0)
-    if run.schedule != "selfplay":
+    if not run.selfplay:
         role = run.schedule
         done = (folder / role / f"{FINAL}.zip").is_file()
         return RunProgress(0, 0, steps, cpu, done)
@@ -63,11 +63,18 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     finished = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}  # not exploiters
     rounds = sum(all((r, role) in finished for role in run.roles) for r in range(1, planned + 1))
     cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
-    done = rounds == planned
+    done = rounds == planned or (run.cpu_hours is not None and rounds > 0
+                                 and cpu_through(turns, rounds) >= run.cpu_hours * 3600)
     role = ""
     if not done:
         role = "pursuer" if (rounds + 1, "pursuer") not in finished else "evader"
     return RunProgress(rounds, planned, steps, cpu, done, role)
+
+
+def cpu_through(turns: list[dict[str, Any]], round: int) -> float:
+    """CPU seconds of the turns (exploiters' included) of rounds 1 to ``round``: a CPU budget is checked
+    after each round against this, so a half-played round never ends a run."""
+    return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
 
 
 def execute_run(run: RunSpec, zoo: Path) -> dict[str, Any]:
@@ -85,13 +92,13 @@ def execute_run(run: RunSpec, zoo: Path) -> dict[str, Any]:
     folder = zoo / run.name
     if before.done:
         return {"did": "finished", "cpu_seconds": 0.0, "progress": before.to_dict()}
-    if run.schedule == "selfplay":
+    if run.selfplay:
         resume = (folder / SELFPLAY_STATE).is_file()
         if folder.exists() and not resume:
             # stopped between creating the run folder and writing its first state: nothing was trained
             shutil.rmtree(folder)
         SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
-                             progress=False)).run()
+                             progress=False)).run(after_round=lambda _: not run_progress(run, zoo).done)
     else:
         resume = (folder / "config.yaml").is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]

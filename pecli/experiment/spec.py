@@ -7,9 +7,10 @@ tournament and which of the paper's tables to report.
     runs:                            # the grid: kinds x seeds x schedules, one run each
       kinds: [none, ukf, image, bimdn, bimdn-mixed]
       seeds: [0, 1, 2]
-      schedules: [selfplay]          # selfplay, pursuer or evader
+      schedules: [selfplay]          # selfplay (the scenario's), alternating, simultaneous, league, pursuer, evader
       rounds: 6                      # self-play budget: rounds of steps_per_round per side
       steps_per_round: 30000
+      # cpu_hours: 4                 # self-play: stop at the first round that reaches it (rounds: the ceiling)
     ranking: {sample: 32, episodes: 100, seeds: 1, keep: 1}
     tournament: {episodes: 500, seeds: 1, baselines: true, players: []}
     report: {table: I}
@@ -33,7 +34,17 @@ from pecli.roles import Role
 from pecli.scenario import Scenario, builtin_config_dir, load_scenario, read_yaml, validation_message
 
 BeliefKind = Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"]
-Schedule = Literal["selfplay", "pursuer", "evader"]
+Schedule = Literal["selfplay", "alternating", "simultaneous", "league", "pursuer", "evader"]
+SELFPLAY_SCHEDULES = ("selfplay", "alternating", "simultaneous", "league")
+"""Schedules of a self-play run: ``selfplay`` as the scenario says (alternating unless it sets otherwise),
+``alternating`` (one side at a time), ``simultaneous`` (both sides learn in the same games), ``league``
+(alternating, with exploiters and the scripted players kept in the pools)."""
+SELFPLAY_SETTINGS: dict[str, dict[str, object]] = {
+    "selfplay": {},
+    "alternating": {"selfplay.schedule": "alternating"},
+    "simultaneous": {"selfplay.schedule": "simultaneous"},
+    "league": {"selfplay.schedule": "alternating", "selfplay.opponents": "league"},
+}
 assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-defined]
 
 
@@ -47,13 +58,17 @@ class RunGrid(_Model):
     kinds: list[BeliefKind] = Field(min_length=1, description="belief kinds, each trained as its own run")
     seeds: list[int] = Field(min_length=1, description="training seeds")
     schedules: list[Schedule] = Field(default=["selfplay"], min_length=1,
-                                      description="selfplay: both sides by alternating self-play; pursuer/evader: one "
-                                      "role against a frozen opponent")
+                                      description="selfplay: both sides by the scenario's self-play (alternating by "
+                                      "default); alternating; simultaneous; league; pursuer/evader: one role against a "
+                                      "frozen opponent")
     opponent: str | None = Field(default=None, description="frozen opponent of pursuer/evader runs (default: greedy, "
                                  "pure-pursuit)")
     rounds: int | None = Field(default=None, ge=1, description="self-play rounds (default: the scenario's)")
     steps_per_round: int | None = Field(default=None, ge=1, description="self-play transitions per side per round")
     steps: int | None = Field(default=None, ge=1, description="budget of pursuer/evader runs (default: the scenario's)")
+    cpu_hours: float | None = Field(default=None, gt=0, le=10_000, allow_inf_nan=False,
+                                    description="self-play runs: stop after the first round at which the run's CPU time "
+                                    "(every turn's, exploiters' included) reaches this; rounds is then a ceiling")
 
     @model_validator(mode="after")
     def _distinct(self) -> RunGrid:
@@ -120,10 +135,15 @@ class RunSpec(BaseModel):
     schedule: Schedule
     opponent: str | None
     scenario: Scenario
+    cpu_hours: float | None = None  # self-play runs: the CPU budget, checked after each round
+
+    @property
+    def selfplay(self) -> bool:
+        return self.schedule in SELFPLAY_SCHEDULES
 
     @property
     def roles(self) -> tuple[Role, ...]:
-        return ("pursuer", "evader") if self.schedule == "selfplay" else (self.schedule,)
+        return ("pursuer", "evader") if self.selfplay else (self.schedule,)  # type: ignore[return-value]
 
 
 def builtin_experiment_dir() -> Path:
@@ -167,7 +187,8 @@ class LoadedExperiment:
             for seed in grid.seeds:
                 for schedule in grid.schedules:
                     settings: dict[str, object] = {"belief": kind}
-                    if schedule == "selfplay":
+                    if schedule in SELFPLAY_SCHEDULES:
+                        settings.update(SELFPLAY_SETTINGS[schedule])
                         if grid.rounds is not None:
                             settings["selfplay.rounds"] = grid.rounds
                         if grid.steps_per_round is not None:
@@ -177,7 +198,8 @@ class LoadedExperiment:
                     name = f"{kind}-s{seed}" if schedule == "selfplay" else f"{kind}-{schedule}-s{seed}"
                     scenario = with_overrides(self.scenario, settings, source=self.source)
                     out.append(RunSpec(name=name, kind=kind, seed=seed, schedule=schedule, opponent=grid.opponent,
-                                       scenario=scenario))
+                                       scenario=scenario, cpu_hours=grid.cpu_hours if schedule in SELFPLAY_SCHEDULES
+                                       else None))
         return out
 
 

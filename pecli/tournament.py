@@ -21,7 +21,6 @@ import signal
 import sys
 import threading
 import time
-import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -472,11 +471,16 @@ def run_tournament(
 
         failures: list[str] = []
         play = executor if executor is not None else local_executor(workers)
-        for index, outcome in play([job for _, job in todo]):
-            if isinstance(outcome, PecliError):
-                failures.append(str(outcome))
-            else:
-                finish(todo[index][0], outcome)
+        outcomes = iter(play([job for _, job in todo]))
+        try:
+            for index, outcome in outcomes:
+                if isinstance(outcome, PecliError):
+                    failures.append(str(outcome))
+                else:
+                    finish(todo[index][0], outcome)
+        finally:  # an exception here (Ctrl-C, SIGTERM) stops the executor's workers now, not when collected
+            if (close := getattr(outcomes, "close", None)) is not None:
+                close()
         if failures:
             more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
             raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")

@@ -88,6 +88,26 @@ def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
     assert result.output.strip().count("\n") == 0 and "exp.yaml: runs: kinds repeats a value" in result.output
     result = runner.invoke(app, ["experiment", "status", str(tmp_path / "nothing")])
     assert result.exit_code == 1 and "holds no experiment" in result.output
+    result = runner.invoke(app, ["experiment", "run", "smoke", "--cpus", "0", "--out", str(tmp_path / "zero")])
+    assert result.exit_code == 1 and "--cpus must be at least 1" in result.output
+    assert not (tmp_path / "zero" / "experiment.json").exists()  # refused before anything is recorded
+
+
+def test_one_driver_per_out_folder(tmp_path: Path) -> None:
+    """Another process writing --out (an OS lock, whatever its PID record says) refuses a second driver."""
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from pecli.locks import acquire; "
+                               f"acquire({str(out)!r}, 'x'); print('held', flush=True); time.sleep(60)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        result = runner.invoke(app, ["experiment", "run", "smoke", "--out", str(out)])
+        assert result.exit_code == 1 and f"is being written by process {holder.pid}" in result.output
+        assert not (out / "experiment.json").exists()
+    finally:
+        holder.kill()
+        holder.wait()
 
 
 def test_self_play_schedules_and_a_cpu_budget_in_the_grid(tmp_path: Path) -> None:

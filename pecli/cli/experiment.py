@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 import socket
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -13,6 +14,7 @@ from rich.live import Live
 from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
+from pecli.locks import locked
 
 if TYPE_CHECKING:
     from pecli.experiment.pipeline import RunStatus
@@ -62,7 +64,7 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
 @app.command()
 @user_errors
 def run(
-    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, smoke) or a "
+    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, smoke) or a "
                                               "YAML file.", show_default=False)],
     address: Annotated[
         str | None,
@@ -104,11 +106,16 @@ def run(
     previous = signal.getsignal(signal.SIGTERM)
     runner = ExperimentRunner(loaded, out, on_update=update)
     again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
-    runner.prepare()  # refuses another experiment's --out, or one another driver runs, before Ray starts
+    cluster = RayCluster(address=address, cpus=cpus)  # refuses bad --cpus/--address before anything is written
+    out.mkdir(parents=True, exist_ok=True)
+    stack = ExitStack()
+    stack.enter_context(locked(out, "experiment output"))  # one driver per --out, however the other one started
+    stack.callback(signal.signal, signal.SIGTERM, previous)
     try:
+        runner.prepare()  # refuses another experiment's --out before Ray starts
         if live is not None:
             live.start()
-        with RayCluster(address=address, cpus=cpus) as cluster:
+        with cluster:
             signal.signal(signal.SIGTERM, interrupt)  # after ray.init, which installs a handler of its own
             where = (f"embedded Ray, {cluster.total_cpus()} CPUs" if cluster.embedded else
                      f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs")
@@ -124,7 +131,7 @@ def run(
     finally:
         if live is not None:
             live.stop()
-        signal.signal(signal.SIGTERM, previous)
+        stack.close()
     session = runner.session
     err_console.print(f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
                       f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",

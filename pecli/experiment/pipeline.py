@@ -34,6 +34,7 @@ from pecli.experiment.runs import RunProgress, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.roles import ROLES
+from pecli.scenario import read_yaml
 
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster
@@ -77,11 +78,7 @@ def open_experiment(out: Path) -> LoadedExperiment:
     path = out / SPEC_FILE
     if not path.is_file():
         raise PecliError(f"{out} holds no experiment (no {SPEC_FILE}): start one with `pecli experiment run NAME --out {out}`")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (yaml.YAMLError, OSError) as exc:
-        raise PecliError(f"{path}: damaged ({type(exc).__name__})") from None
-    return experiment_from_dict(data, str(path))
+    return experiment_from_dict(read_yaml(path), str(path))  # ConfigError in one line if damaged
 
 
 def read_state(out: Path) -> dict[str, Any]:

@@ -92,7 +92,8 @@ class RayCluster:
             # driver's priority (`nice -n 10 pecli experiment run ...` puts them at 10)
             os.environ.setdefault(WORKER_NICENESS, "0")
         try:
-            ray.init(address=self.address, **options)
+            # "local" starts a new Ray even where `ray start` left a cluster's address behind (None would join it)
+            ray.init(address=self.address or "local", **options)
         except (ConnectionError, RayError, ValueError, RuntimeError) as exc:
             where = f"the Ray cluster at {self.address}" if self.address else "an embedded Ray"
             raise PecliError(f"cannot start or join {where}: {str(exc).splitlines()[0] if str(exc) else exc}") from None
@@ -159,6 +160,10 @@ class RayCluster:
                         yield refs[ref], self.result(ref)
                     except PecliError as exc:
                         yield refs[ref], exc
+                    except Exception as exc:  # a worker lost for good, a MemoryError in the task: that pairing fails
+                        yield refs[ref], PecliError(f"a pairing failed on Ray ({type(exc).__name__}: "
+                                                    f"{str(exc).splitlines()[0] if str(exc) else exc}); Ray's logs are "
+                                                    "in /tmp/ray/session_latest/logs/")
         finally:
             for ref in pending:  # stopped early (Ctrl-C, an error): drop what is still queued
                 ray.cancel(ref, force=True)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -48,15 +48,21 @@ SELFPLAY_SETTINGS: dict[str, dict[str, object]] = {
 assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-defined]
 
 
+MAX_SEED = 2**32 - 1  # what NumPy and SB3 take as a seed
+MAX_EPISODES = 1_000_000  # per pairing and seed: one batched game (pecli.cli.common.MAX_EPISODES)
+MAX_SEEDS = 1000  # seeds of a ranking or tournament pairing
+
+
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)  # `true` is not a number, nor 1 a boolean
 
 
 class RunGrid(_Model):
     """Every combination of belief kind, seed and schedule is one run."""
 
     kinds: list[BeliefKind] = Field(min_length=1, description="belief kinds, each trained as its own run")
-    seeds: list[int] = Field(min_length=1, description="training seeds")
+    seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] = Field(min_length=1, max_length=MAX_SEEDS,
+                                                                  description="training seeds")
     schedules: list[Schedule] = Field(default=["selfplay"], min_length=1,
                                       description="selfplay: both sides by the scenario's self-play (alternating by "
                                       "default); alternating; simultaneous; league; pursuer/evader: one role against a "
@@ -76,8 +82,10 @@ class RunGrid(_Model):
             values = getattr(self, key)
             if len(set(values)) != len(values):
                 raise ValueError(f"{key} repeats a value ({values})")
-        if any(seed < 0 for seed in self.seeds):
-            raise ValueError("seeds must not be negative")
+        one_role = set(self.schedules) - set(SELFPLAY_SCHEDULES)
+        if not set(self.schedules) & set(SELFPLAY_SCHEDULES) and len(one_role) < 2:
+            raise ValueError(f"schedules {self.schedules} train only {one_role.pop()}s: the ranking and the tournament "
+                             "need both sides (add a self-play schedule, or the other role)")
         return self
 
 
@@ -85,17 +93,17 @@ class Ranking(_Model):
     """The paper's checkpoint ranking: each checkpoint against ``sample`` random checkpoints of the other
     side; the best ``keep`` of each run and role by mean capture rate go to the tournament."""
 
-    sample: int = Field(default=32, ge=1)
-    episodes: int = Field(default=100, ge=1, description="episodes per seed and pairing")
-    seeds: int = Field(default=1, ge=1)
+    sample: int = Field(default=32, ge=1, le=100_000)
+    episodes: int = Field(default=100, ge=1, le=MAX_EPISODES, description="episodes per seed and pairing")
+    seeds: int = Field(default=1, ge=1, le=MAX_SEEDS)
     keep: int = Field(default=1, ge=1, description="checkpoints kept per run and role")
 
 
 class TournamentSettings(_Model):
     """The final tournament: kept pursuers x kept evaders, plus the heuristics and ``players``."""
 
-    episodes: int = Field(default=500, ge=1, description="episodes per seed and pairing")
-    seeds: int = Field(default=1, ge=1)
+    episodes: int = Field(default=500, ge=1, le=MAX_EPISODES, description="episodes per seed and pairing")
+    seeds: int = Field(default=1, ge=1, le=MAX_SEEDS)
     baselines: bool = Field(default=True, description="add the heuristics: pure pursuit; random walk, greedy, rash")
     players: list[str] = Field(default=[], description="more players, as policy strings (e.g. hj)")
 

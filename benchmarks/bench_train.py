@@ -113,7 +113,7 @@ def curves(args: argparse.Namespace) -> None:
     while pending or running:
         while pending and len(running) < args.jobs:
             seed = pending.pop(0)
-            name = f"{args.config}-{args.belief}-s{seed}"
+            name = f"{args.label or args.config}-{args.belief}-s{seed}"
             command = [sys.executable, "-m", "pecli", "train", "pursuer", "--zoo", str(CURVES), "--name", name, "-q"]
             if args.resume:  # the run's own settings and budget; its CPU time continues from its checkpoint
                 command += ["--resume"]
@@ -125,7 +125,7 @@ def curves(args: argparse.Namespace) -> None:
             running.append((seed, subprocess.Popen(command, cwd=ROOT)))
         time.sleep(5)
         for seed, process in list(running):
-            csv_path = CURVES / f"{args.config}-{args.belief}-s{seed}" / "eval_pursuer.csv"
+            csv_path = CURVES / f"{args.label or args.config}-{args.belief}-s{seed}" / "eval_pursuer.csv"
             used = _last_cpu_seconds(csv_path)
             if process.poll() is not None or used >= 60 * args.minutes:
                 if process.poll() is None:
@@ -156,7 +156,7 @@ def report(args: argparse.Namespace) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = sorted(CURVES.glob(f"{args.config}-{args.belief}-s*/eval_pursuer.csv"))
+    runs = sorted(CURVES.glob(f"{args.label or args.config}-{args.belief}-s*/eval_pursuer.csv"))
     if not runs:
         sys.exit(f"no curve runs in {CURVES}: run the 'curves' step first")
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -172,11 +172,11 @@ def report(args: argparse.Namespace) -> None:
     ax.set_xlabel("CPU minutes (one torch thread)")
     ax.set_ylabel("capture rate vs greedy (200 episodes)")
     ax.set_ylim(0, 1)
-    ax.set_title(f"pecli train pursuer, {args.config}, belief {args.belief}")
+    ax.set_title(f"pecli train pursuer, {args.label or args.config}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
     out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper"
-                                       else f"learning_curves_{args.config}_{args.belief}.png")
+                                       else f"learning_curves_{args.label or args.config}_{args.belief}.png")
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
     for minutes, values in at.items():
@@ -262,6 +262,7 @@ def main() -> None:
     c.add_argument("--max-steps", type=int, default=600_000,
                    help="the training budget; the curriculum spans its first 30 %% (paper.yaml)")
     c.add_argument("--set", action="append", default=[], help="extra training settings, KEY=VALUE")
+    c.add_argument("--label", help="names the runs instead of --config (for a variant made with --set)")
     c.add_argument("--resume", action="store_true",
                    help="continue stopped runs (pecli train --resume) until --minutes of their CPU time in all")
     r = sub.add_parser("report")
@@ -269,6 +270,7 @@ def main() -> None:
     r.add_argument("--belief", default="none")
     r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
     r.add_argument("--out", type=Path, default=None, help="the plot (default: docs/learning_curves_...png)")
+    r.add_argument("--label", help="the --label the curves were run with")
     p = sub.add_parser("selfplay")
     p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])

@@ -59,6 +59,15 @@ def test_builtin_experiments() -> None:
     ({"training": {"batch_size": "big"}}, "training.batch_size: Input should be a valid integer"),
     ({"training": {"no_such": 1}}, "training.no_such: unknown key"),
     ({"scenario": "nowhere"}, "scenario: config not found: nowhere"),
+    ({"runs": {**SMOKE["runs"], "seeds": [True]}}, "runs.seeds.0: a number is expected here, not the boolean true"),
+    ({"runs": {**SMOKE["runs"], "schedules": ["pursuer"]}}, "train only pursuers"),
+    ({"runs": {**SMOKE["runs"], "schedules": ["pursuer", "evader"], "opponent": "greedy"}},
+     "runs.opponent: one opponent cannot train both"),
+    ({"runs": {**SMOKE["runs"], "schedules": ["selfplay", "evader"], "opponent": "greedy"}},
+     "runs.opponent: 'greedy' cannot play pursuer"),
+    ({"tournament": {"players": ["hj"]}}, "tournament.players.0: hj plays point mass vs point mass only"),
+    ({"tournament": {"players": ["grabby"]}}, "tournament.players.0: unknown player 'grabby'"),
+    ({"tournament": {"episodes": 10**7}}, "tournament.episodes: Input should be less than or equal to 1000000"),
 ])
 def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, message: str) -> None:
     path = write(tmp_path, {**SMOKE, **change})

@@ -231,7 +231,33 @@ def experiment_from_dict(data: object, source: str, base: Path | None = None) ->
     if scenario_path.is_file():  # a scenario file: recorded by its absolute path, read from wherever --out is
         spec = spec.model_copy(update={"scenario": str(scenario_path.resolve())})
     scenario = with_overrides(scenario, _flatten(dict(spec.training)), source=source)
+    _check_players(spec, scenario, source)
     return LoadedExperiment(spec, scenario, source)
+
+
+def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
+    """Refuse, before any training, an opponent or tournament player that could not play: a name that is
+    no policy, a role it cannot take, an ``hj`` player in a game that is not point mass vs point mass."""
+    from pecli.policies.registry import BUILTINS, builtin_names, family_of
+
+    one_role = [s for s in spec.runs.schedules if s not in SELFPLAY_SCHEDULES]
+    if spec.runs.opponent is not None and one_role:
+        if len(one_role) > 1:
+            raise ConfigError(f"{source}: runs.opponent: one opponent cannot train both pursuers and evaders "
+                              "(put the pursuer and the evader runs in two experiments)")
+        role = "evader" if one_role[0] == "pursuer" else "pursuer"
+        name = spec.runs.opponent
+        if name in BUILTINS and role not in BUILTINS[name].roles:
+            raise ConfigError(f"{source}: runs.opponent: '{name}' cannot play {role} (for {role}: "
+                              f"{', '.join(builtin_names(role))})")
+    for i, player in enumerate(spec.tournament.players):
+        family = family_of(player)
+        if family == "hj" and not (scenario.pursuer.kind == scenario.evader.kind == "point_mass"):
+            raise ConfigError(f"{source}: tournament.players.{i}: hj plays point mass vs point mass only, not the "
+                              f"game of scenario '{scenario.name}'")
+        if family is None and player not in BUILTINS and ":" not in player and not Path(player).exists():
+            raise ConfigError(f"{source}: tournament.players.{i}: unknown player '{player}' (a built-in policy such "
+                              f"as {', '.join(builtin_names()[:4])}, a family such as hj, a file or module:Class)")
 
 
 def load_experiment(name_or_path: str | Path) -> LoadedExperiment:

@@ -87,6 +87,10 @@ class ExperimentReport:
                              "(`pecli experiment status` says how far it got)") from None
         except (OSError, ValueError) as exc:
             raise PecliError(f"{out}: damaged results ({type(exc).__name__}: {exc})") from None
+        if not (isinstance(self.data, dict) and isinstance(kept, dict)
+                and all(key in self.data for key in ("pairings", "ratings", "episodes_per_seed", "seeds"))):
+            raise PecliError(f"{out}: damaged results (tournament/results.json or {KEPT_FILE} is not what "
+                             "`pecli experiment run` writes): run it again to rewrite them")
         runs = {run.name: run for run in self.experiment.runs()}
         self.group_of_spec: dict[str, str] = {}
         learned: list[str] = []

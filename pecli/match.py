@@ -18,6 +18,8 @@ from pecli.game import Game
 from pecli.policies.base import Policy
 from pecli.scenario import Scenario
 
+MAX_EPISODES = 1_000_000  # episodes played at once: one batched game, about 1.5 KiB each
+
 
 @dataclass(frozen=True)
 class MatchResult:

@@ -97,12 +97,11 @@ def require_positive(value: int, name: str) -> int:
     return value
 
 
-MAX_EPISODES = 1_000_000  # per batch: episodes played at once are one batched game
-
-
 def require_batch(episodes: int, hint: str) -> int:
     """``episodes`` (``--episodes``) if a positive count that fits one batched game, else one line ending
     in ``hint``, what to do instead."""
+    from pecli.match import MAX_EPISODES
+
     require_positive(episodes, "--episodes")
     if episodes > MAX_EPISODES:
         raise PecliError(f"--episodes {episodes} is more than one batch can play (at most {MAX_EPISODES:,} at once, "

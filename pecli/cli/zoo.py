@@ -87,18 +87,15 @@ def _check_network(checkpoint: Path, meta: CheckpointMeta) -> None:
 
 
 def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:
-    """The scenario ``checkpoint`` was trained on: its run's ``config.yaml``, else the built-in scenario
-    of its name, if the fingerprint matches; ``None`` otherwise."""
+    """The scenario ``checkpoint`` was trained on: its run's (:func:`~pecli.policies.registry.stored_scenario`),
+    else the built-in scenario of its name if the fingerprint matches; ``None`` otherwise."""
+    from pecli.policies.registry import stored_scenario
     from pecli.scenario import builtin_names, load_scenario
 
-    candidates: list[str | Path] = [checkpoint.resolve().parent.parent / "config.yaml"]
+    if (scenario := stored_scenario(str(checkpoint))) is not None:
+        return scenario
     if meta.scenario in builtin_names():
-        candidates.append(meta.scenario)
-    for candidate in candidates:
-        try:
-            scenario = load_scenario(candidate)
-        except PecliError:
-            continue
+        scenario = load_scenario(meta.scenario)
         if scenario.fingerprint() == meta.scenario_hash:
             return scenario
     return None

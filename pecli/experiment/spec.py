@@ -30,6 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
+from pecli.match import MAX_EPISODES
 from pecli.roles import Role
 from pecli.scenario import Scenario, builtin_config_dir, load_scenario, read_yaml, validation_message
 
@@ -49,7 +50,6 @@ assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-define
 
 
 MAX_SEED = 2**32 - 1  # what NumPy and SB3 take as a seed
-MAX_EPISODES = 1_000_000  # per pairing and seed: one batched game (pecli.cli.common.MAX_EPISODES)
 MAX_SEEDS = 1000  # seeds of a ranking or tournament pairing
 
 

@@ -69,6 +69,20 @@ class FiniteCheck(BaseCallback):
             "(lower the learning rate, or check the rewards and reward_scale)")
 
 
+def every_episodes(every: int, done: int, action: Callable[[int], None]) -> Callable[[int], None]:
+    """A listener for an episode counter (:attr:`EpisodeStats.listeners`) that calls ``action(total)`` each
+    time the count passes the next multiple of ``every`` after ``done`` (a checkpoint cadence)."""
+    following = (done // every + 1) * every
+
+    def listener(total: int) -> None:
+        nonlocal following
+        if total >= following:
+            action(total)
+            following = (total // every + 1) * every
+
+    return listener
+
+
 class CurriculumCallback(BaseCallback):
     """Paper section V-A: over the first ``fraction`` of ``total_steps`` the pursuer's FOV shrinks
     linearly from 2pi to its configured value and the evader's speed limit grows from 0 to its own.

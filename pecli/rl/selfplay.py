@@ -43,7 +43,15 @@ from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, FiniteCheck, PoolTracker, ProgressDisplay, RoundDisplay
+from pecli.rl.callbacks import (
+    CurriculumCallback,
+    EpisodeStats,
+    FiniteCheck,
+    PoolTracker,
+    ProgressDisplay,
+    RoundDisplay,
+    every_episodes,
+)
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
@@ -352,15 +360,8 @@ class SelfPlay:
             cpu = now
             return sources
 
-        next_commit = (stats["pursuer"].episodes // t.checkpoint_every + 1) * t.checkpoint_every
-
-        def checkpoint(episodes: int) -> None:
-            nonlocal next_commit
-            if episodes >= next_commit:
-                commit()
-                next_commit = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
-
-        stats["pursuer"].listeners.append(checkpoint)
+        stats["pursuer"].listeners.append(every_episodes(t.checkpoint_every, stats["pursuer"].episodes,
+                                                         lambda _: commit()))
         remaining = max(progress[role]["start_steps"] + sp.steps_per_round - int(learners[role].model.num_timesteps)
                         for role in ROLES)
         title = f"round {r}/{sp.rounds} · pursuer and evader together (simultaneous)"
@@ -440,15 +441,7 @@ class SelfPlay:
             run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + progress["cpu_seconds"]
             return learner.durable.save(model, learner.fit, episodes, run_cpu, extra=dict(progress))
 
-        next_commit = (tracker.episodes // t.checkpoint_every + 1) * t.checkpoint_every
-
-        def checkpoint(episodes: int) -> None:
-            nonlocal next_commit
-            if episodes >= next_commit:
-                commit()
-                next_commit = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
-
-        tracker.listeners.append(checkpoint)
+        tracker.listeners.append(every_episodes(t.checkpoint_every, tracker.episodes, lambda _: commit()))
         remaining = progress["start_steps"] + sp.steps_per_round - int(model.num_timesteps)
         what = f"{role} exploiter vs the main {other}" if kind == EXPLOITER else \
             f"{role} vs {len(pool.entries)} {other}s ({sp.opponents})"

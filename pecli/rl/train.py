@@ -26,7 +26,7 @@ from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.durable import DurableState
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay
+from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay, every_episodes
 from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
@@ -274,15 +274,9 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         return paths[0]
 
     stats = EpisodeStats(episodes=episodes)
-    next_checkpoint = (episodes // t.checkpoint_every + 1) * t.checkpoint_every
-
-    def checkpoint(total: int) -> None:
-        nonlocal next_checkpoint
-        if total >= next_checkpoint:  # named after the last boundary it passed
-            commit(total, Run.episode_name(total // t.checkpoint_every * t.checkpoint_every))
-            next_checkpoint = (total // t.checkpoint_every + 1) * t.checkpoint_every
-
-    stats.listeners.append(checkpoint)
+    every = t.checkpoint_every  # a checkpoint is named after the last boundary it passed
+    stats.listeners.append(every_episodes(every, episodes, lambda total: commit(
+        total, Run.episode_name(total // every * every))))
     callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps

@@ -107,6 +107,40 @@ def test_evaluations_reach_the_pruner(quick: Scenario, tmp_path: Path) -> None:
     assert trial.state == optuna.trial.TrialState.PRUNED and list(trial.intermediate_values) == [1]
 
 
+def test_a_trial_with_repeats_trains_on_each_seed_and_scores_their_mean(quick: Scenario, tmp_path: Path,
+                                                                         monkeypatch) -> None:
+    seeds: list[int] = []
+    train = tune.Objective._one_role
+
+    def recorded(self, trial, scenario, seed, clock, report):  # type: ignore[no-untyped-def]
+        seeds.append(seed)
+        return train(self, trial, scenario, seed, clock, report)
+
+    monkeypatch.setattr(tune.Objective, "_one_role", recorded)
+    study = optuna.create_study(direction="maximize")
+    study.optimize(tune.Objective(settings(quick, repeats=3, seed=10), tmp_path), n_trials=2)
+    assert seeds == [10, 11, 12, 13, 14, 15]  # trial n trains on seed + 3n + i: no seed is used twice
+    for trial in study.trials:
+        scores = trial.user_attrs["scores"]
+        assert trial.state == optuna.trial.TrialState.COMPLETE and len(scores) == 3
+        assert sorted(trial.intermediate_values) == [1, 2, 3, 4, 5, 6]  # run i's evaluation k is step 2i + k
+        assert trial.value == pytest.approx(sum(scores) / 3) == pytest.approx(trial.intermediate_values[6])
+        assert trial.intermediate_values[4] == pytest.approx((scores[0] + scores[1]) / 2)  # the running mean
+
+
+@pytest.mark.parametrize("option", ["--repeats", "--cpu-minutes", "--evaluations", "--eval-episodes"])
+def test_zero_budgets_are_refused_not_taken_for_the_default(tmp_path: Path, option: str) -> None:
+    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", option, "0", "--dir", str(tmp_path)])
+    assert result.exit_code == 1 and f"{option}" in result.output and "must be positive" in result.output, result.output
+    assert not (tmp_path / "studies.db").exists()
+
+
+def test_repeats_are_kept_on_resume(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["tune", "pursuer", "--study", "x", "--resume", "--repeats", "2",
+                                 "--dir", str(tmp_path)])
+    assert result.exit_code == 1 and "keeps its settings (not --repeats)" in result.output, result.output
+
+
 def test_a_selfplay_trial_scores_both_sides_after_each_round(quick: Scenario, tmp_path: Path) -> None:
     space = {"fixed": {**SMALL["fixed"], "selfplay.rounds": 1, "selfplay.steps_per_round": 200,
                        "curriculum.enabled": False}, "parameters": {"learning_rate": SMALL["parameters"]["learning_rate"]}}

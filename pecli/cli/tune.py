@@ -51,7 +51,8 @@ def _tune(what: str, **options: Any) -> None:
         if o["study"] is None:
             raise PecliError("--resume needs the --study to continue")
         given = [f"--{k.replace('_', '-')}" for k in ("config", "opponent", "eval_opponents", "cpu_minutes",
-                                                      "evaluations", "eval_episodes", "space", "pruner", "seed", "algo")
+                                                      "evaluations", "eval_episodes", "space", "pruner", "seed", "algo",
+                                                      "repeats")
                  if o[k] is not None]
         if given:
             raise PecliError(f"a resumed study keeps its settings (not {', '.join(given)}); only --trials, --jobs "
@@ -70,20 +71,24 @@ def _tune(what: str, **options: Any) -> None:
         opponent = None if what == "selfplay" else (o["opponent"] or DEFAULT_OPPONENT[what])
         evaluated = ([] if what == "selfplay" else
                      [name.strip() for name in (o["eval_opponents"] or opponent).split(",") if name.strip()])
+        given = {k: o[k] for k in ("cpu_minutes", "evaluations", "eval_episodes", "seed", "repeats") if o[k] is not None}
         settings = TuneSettings(
             what=what, scenario=scenario.model_dump(mode="json"), space=space.model_dump(mode="json"),
-            opponent=opponent, eval_opponents=evaluated, cpu_minutes=o["cpu_minutes"] or 3.0,
-            evaluations=o["evaluations"] or 6, eval_episodes=o["eval_episodes"] or 200,
-            pruner=(o["pruner"] or PrunerChoice.median).value, seed=o["seed"] or 0, space_text=text,
+            opponent=opponent, eval_opponents=evaluated, pruner=(o["pruner"] or PrunerChoice.median).value,
+            space_text=text, **{"cpu_minutes": 3.0, **given},
         )
-        if settings.cpu_minutes <= 0 or settings.evaluations < 1 or settings.eval_episodes < 1:
-            raise PecliError("--cpu-minutes, --evaluations and --eval-episodes must be positive")
+        if min(settings.cpu_minutes, settings.evaluations, settings.eval_episodes, settings.repeats) <= 0:
+            raise PecliError("--cpu-minutes, --evaluations, --eval-episodes and --repeats must be positive")
+        if not 0 <= settings.seed < 2**32:
+            raise PecliError("--seed must be between 0 and 2**32 - 1")
         _check_opponents(settings, scenario)
         study = new_study(settings, storage, o["study"] or f"{scenario.name}-{what}")
     total = o["trials"] if o["trials"] is not None else 30
     folder = o["dir"] / study.study_name
+    runs = f"{settings.repeats} runs of " if settings.repeats > 1 else ""
     err_console.print(f"study [bold]{study.study_name}[/] in {storage}: {what} on {settings.scenario['name']}, "
-                      f"{total} trials of {settings.cpu_minutes:g} CPU-min, {o['jobs']} at a time", highlight=False)
+                      f"{total} trials of {runs}{settings.cpu_minutes:g} CPU-min, {o['jobs']} at a time",
+                      highlight=False)
     worker = Worker(storage, study.study_name, total, folder, o["device"], settings.seed,
                     report=lambda line: err_console.print(line, highlight=False, markup=False))
 
@@ -141,13 +146,17 @@ def _command(what: str, doc: str) -> Any:
                                                             "(successive halving) or none.")] = None,
         seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of trial 0 (trial i trains with "
                                                  "seed + i; default 0).")] = None,
+        repeats: Annotated[int | None, typer.Option("--repeats", "-r", help="Training runs per trial, each on its "
+                                                    "own seed (trial i: seed + i*R ... seed + i*R + R-1), each "
+                                                    "with --cpu-minutes; the trial scores their mean (default 1)."
+                                                    )] = None,
         device: DeviceOption = "cpu",
         folder: DirOption = DEFAULT_DIR,
     ) -> None:
         _tune(what, config=config, opponent=opponent, eval_opponents=eval_opponents, trials=trials,
               cpu_minutes=cpu_minutes, evaluations=evaluations, eval_episodes=eval_episodes, jobs=jobs,
               storage=storage, study=study, resume=resume, space=space, algo=algo, pruner=pruner, seed=seed,
-              device=device, dir=folder)
+              repeats=repeats, device=device, dir=folder)
 
     command.__doc__ = doc
     return command

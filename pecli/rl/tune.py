@@ -5,8 +5,11 @@ evader against a frozen opponent (or both by self-play) until it has used ``cpu_
 and evaluates its learner ``evaluations`` times along the way against a fixed set of opponents, on
 evaluation seeds no training game uses. Each evaluation is reported to Optuna, whose pruner (median
 or successive halving) stops hopeless trials early; the last one is the trial's score: the capture
-rate for a pursuer, the escape rate for an evader, their mean in self-play. A new study's first trial
-is the config's own settings (as far as the search space can express them): the baseline.
+rate for a pursuer, the escape rate for an evader, their mean in self-play. With ``repeats`` R > 1 a
+trial trains R times on different seeds, one after the other, and scores the mean of their last
+evaluations, so that settings which learn on one seed and fail on another rank below settings that
+learn on every seed. A new study's first trial is the config's own settings (as far as the search
+space can express them): the baseline.
 
 The study lives in an Optuna storage (SQLite by default), with its settings in the study's user
 attributes: ``--resume`` continues it, on this machine or another, and several processes (``--jobs``
@@ -68,10 +71,12 @@ class TuneSettings:
     eval_episodes: int = 200
     pruner: str = "median"
     seed: int = 0
+    repeats: int = 1  # training runs (seeds) per trial; the score is the mean of theirs
     space_text: str = field(default="", repr=False)
 
     @property
     def budget_s(self) -> float:
+        """The CPU budget of one training run (a trial has ``repeats`` of them)."""
         return 60.0 * self.cpu_minutes
 
 
@@ -239,20 +244,23 @@ class Objective:
         overrides = suggest(trial, self.space, self.base.training)
         trial.set_user_attr("overrides", overrides)
         scenario = with_overrides(self.scenario, overrides, source=f"trial {trial.number}")
-        seed = self.settings.seed + trial.number
+        s = self.settings
+        train = self._selfplay if s.what == "selfplay" else self._one_role
+        scores: list[float] = []
         start = time.process_time()
-        clock = Clock(start, self.settings.budget_s, self.settings.evaluations)
         try:
-            if self.settings.what == "selfplay":
-                score = self._selfplay(trial, scenario, seed, clock)
-            else:
-                score = self._one_role(trial, scenario, seed, clock)
+            for i in range(s.repeats):
+                seed = s.seed + trial.number * s.repeats + i  # trial n's seeds: no other trial of the study uses them
+                scores.append(train(trial, scenario, seed, Clock(time.process_time(), s.budget_s, s.evaluations),
+                                    _Reporter(trial, scores, s.evaluations)))
         finally:
             trial.set_user_attr("cpu_seconds", round(time.process_time() - start, 2))
-        return score
+            trial.set_user_attr("scores", scores)
+        return float(sum(scores) / len(scores))
 
     # -- one role against a frozen opponent ------------------------------------------------------------------
-    def _one_role(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock) -> float:
+    def _one_role(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock,
+                  report: _Reporter) -> float:
         role: Role = self.settings.what  # type: ignore[assignment]
         job = TrainJob(role=role, scenario=scenario, opponent=self.settings.opponent or "", zoo=self.folder,
                        name=f"trial-{trial.number}", seed=seed, progress=False, device=self.device)
@@ -273,7 +281,7 @@ class Objective:
 
         def evaluate(k: int) -> float:
             score = self.score(scenario, {role: (job, model)})
-            _report(trial, k, score)
+            report(k, score)
             return score
 
         budget = Budget(clock, evaluate)
@@ -281,10 +289,11 @@ class Objective:
         return budget.finish()
 
     # -- both roles by self-play ---------------------------------------------------------------------------
-    def _selfplay(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock) -> float:
+    def _selfplay(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock,
+                  report: _Reporter) -> float:
         from pecli.rl.selfplay import SelfPlay, SelfPlayJob
 
-        folder = self.folder / f"trial-{trial.number}"
+        folder = self.folder / f"trial-{trial.number}-{seed}"
         shutil.rmtree(folder, ignore_errors=True)  # a trial run again after a kill starts afresh
         loop = SelfPlay(SelfPlayJob(scenario=scenario, zoo=self.folder, name=folder.name, seed=seed, progress=False,
                                     device=self.device))
@@ -294,7 +303,7 @@ class Objective:
             learners = {role: (loop.learners[role].train_job, loop.learners[role].model) for role in ROLES}
             k = clock.due()
             last.append(self.score(scenario, learners))
-            _report(trial, k, last[-1])
+            report(k, last[-1])
             return not clock.spent()
 
         try:
@@ -319,11 +328,22 @@ class Objective:
         return float(sum(rates) / len(rates))
 
 
-def _report(trial: optuna.Trial, k: int, score: float) -> None:
-    """Tell Optuna the evaluation at step ``k``; :class:`optuna.TrialPruned` if the pruner stops the trial."""
-    trial.report(score, k)
-    if trial.should_prune():
-        raise optuna.TrialPruned(f"evaluation {k}: {score:.3f}")
+class _Reporter:
+    """Tells Optuna a trial's evaluations; raises :class:`optuna.TrialPruned` if the pruner stops the trial.
+
+    Evaluation ``k`` of the trial's run ``i`` (``i`` earlier runs scored in ``scores``) is step
+    ``i * evaluations + k``, and its value is the mean of the earlier runs' scores and this evaluation,
+    so that the last value reported is the trial's score and trials compare step by step."""
+
+    def __init__(self, trial: optuna.Trial, scores: list[float], evaluations: int) -> None:
+        self.trial, self.scores, self.evaluations = trial, scores, evaluations
+
+    def __call__(self, k: int, score: float) -> None:
+        i = len(self.scores)
+        value = (sum(self.scores) + score) / (i + 1)
+        self.trial.report(value, i * self.evaluations + k)
+        if self.trial.should_prune():
+            raise optuna.TrialPruned(f"run {i + 1}, evaluation {k}: {score:.3f} (mean {value:.3f})")
 
 
 class Clock:

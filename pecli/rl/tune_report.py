@@ -44,7 +44,9 @@ def summary(study: optuna.Study, count: int = 10) -> str:
         f"# Study `{study.study_name}`", "",
         f"`pecli tune {s.what}` on `{s.scenario['name']}`"
         + (f" against `{s.opponent}`" if s.opponent else "")
-        + f": {s.cpu_minutes:g} CPU-minutes per trial, {s.evaluations} evaluations of {s.eval_episodes} episodes"
+        + (f": {s.repeats} runs of {s.cpu_minutes:g} CPU-minutes per trial (the score is their mean), "
+           if s.repeats > 1 else f": {s.cpu_minutes:g} CPU-minutes per trial, ")
+        + f"{s.evaluations} evaluations of {s.eval_episodes} episodes"
         f" against {', '.join(s.eval_opponents)}; pruner {s.pruner}.", "",
         f"Trials: {counts[TrialState.COMPLETE]} complete, {counts[TrialState.PRUNED]} pruned, "
         f"{counts[TrialState.FAIL]} failed, {counts[TrialState.RUNNING]} running.", "",
@@ -52,11 +54,14 @@ def summary(study: optuna.Study, count: int = 10) -> str:
     best = best_trials(study, count)
     if best:
         names = list(dict.fromkeys(name for t in best for name in t.params))
-        lines += ["## Best trials", "", "| trial | score | CPU-min | " + " | ".join(names) + " |",
-                  "| ---: | ---: | ---: | " + " | ".join("---" for _ in names) + " |"]
+        seeds = s.repeats > 1  # each seed's score beside the mean
+        lines += ["## Best trials", "", "| trial | score | " + ("per seed | " if seeds else "") + "CPU-min | "
+                  + " | ".join(names) + " |",
+                  "| ---: | ---: | " + ("--- | " if seeds else "") + "---: | " + " | ".join("---" for _ in names) + " |"]
         for t in best:
             cells = [_cell(t.params.get(name, "")) for name in names]
-            lines.append(f"| {t.number} | {t.value:.3f} | {t.user_attrs.get('cpu_seconds', 0) / 60:.1f} | "
+            each = " ".join(f"{v:.2f}" for v in t.user_attrs.get("scores", [])) + " | " if seeds else ""
+            lines.append(f"| {t.number} | {t.value:.3f} | {each}{t.user_attrs.get('cpu_seconds', 0) / 60:.1f} | "
                          + " | ".join(cells) + " |")
         lines.append("")
     shares = importances(study)

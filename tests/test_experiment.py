@@ -90,6 +90,30 @@ def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
     assert Path(loaded.spec.scenario) == (folder / "game.yaml").resolve()  # so --out can read it from anywhere
 
 
+def test_an_edited_scenario_under_an_experiment_is_refused(tmp_path: Path) -> None:
+    from pecli.experiment.pipeline import SCENARIO_FILE
+    from pecli.scenario import builtin_config_dir
+
+    game = tmp_path / "game.yaml"
+    game.write_text((builtin_config_dir() / "quick.yaml").read_text())
+    path, out = write(tmp_path, {**SMOKE, "scenario": "game.yaml"}), tmp_path / "out"
+
+    def prepare() -> None:  # a driver that records the experiment and ends
+        runner = ExperimentRunner(load_experiment(path), out)
+        runner.prepare()
+        runner._save(ended="interrupted")
+
+    prepare()
+    assert (out / SCENARIO_FILE).is_file()
+    prepare()  # the same game: continues
+    game.write_text(game.read_text().replace("horizon: 150", "horizon: 120"))
+    with pytest.raises(PecliError, match=r"'.*game.yaml' has changed since .* \(horizon: 150 -> 120; as first run"):
+        prepare()
+    (out / SCENARIO_FILE).unlink()  # an experiment from before pecli recorded its scenario: recorded now
+    prepare()
+    assert (out / SCENARIO_FILE).is_file()
+
+
 def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
     path = write(tmp_path, {**SMOKE, "runs": {**SMOKE["runs"], "kinds": ["none", "none"]}})
     result = runner.invoke(app, ["experiment", "run", str(path), "--out", str(tmp_path / "out")])

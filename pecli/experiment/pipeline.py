@@ -4,6 +4,7 @@ Everything lives in ``out``::
 
     out/
         experiment.yaml      the experiment as run (``status`` and ``report`` read it)
+        scenario.yaml        its scenario as first run (the game and training settings), checked on every run
         experiment.json      the driver's record: each run's status, the stages, one entry per session
         zoo/<run>/           the runs (self-play or one-role runs), each resumable on its own
         tasks/<run>.json     where and since when a run's task runs (written by the task)
@@ -41,6 +42,7 @@ if TYPE_CHECKING:
     from pecli.tournament import PairingResult, TournamentResults
 
 SPEC_FILE = "experiment.yaml"
+SCENARIO_FILE = "scenario.yaml"
 STATE_FILE = "experiment.json"
 KEPT_FILE = "kept.json"
 POLL_SECONDS = 1.0
@@ -166,9 +168,19 @@ class ExperimentRunner:
                                  "give another --out (or the same experiment file to continue it)")
             if driver_alive(state):
                 raise PecliError(f"{self.out} is being run by process {state['driver']['pid']}: wait for it, or stop it")
+        scenario = self.experiment.scenario.model_dump(mode="json", exclude_defaults=True)
+        recorded = self.out / SCENARIO_FILE
+        if state and recorded.is_file():
+            changed = changes(read_yaml(recorded), scenario)
+            if changed:
+                more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
+                raise PecliError(f"the scenario '{spec.scenario}' has changed since {self.out} started "
+                                 f"({changed[0]}{more}; as first run: {recorded}): restore it, or give another --out")
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "tasks").mkdir(exist_ok=True)
         atomic_write_text(self.out / SPEC_FILE, yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
+        if not recorded.is_file():  # an experiment started before pecli recorded it: from now on
+            atomic_write_text(recorded, yaml.safe_dump(scenario, sort_keys=False))
         self.sessions = state.get("sessions", [])
         self.stages: dict[str, Any] = state.get("stages", {})
         self.prepared = True
@@ -354,6 +366,19 @@ class ExperimentRunner:
         paths = write_report(self.out)
         self.stages["report"] = "done"
         return paths[0]
+
+
+def changes(old: Any, new: dict[str, Any]) -> list[str]:
+    """The settings that differ between two scenario dumps, as ``key: old -> new`` (dotted keys)."""
+
+    def flat(data: Any, prefix: str = "") -> dict[str, Any]:
+        if not isinstance(data, dict) or not data:
+            return {prefix.rstrip("."): data}
+        return {k: v for key, value in data.items() for k, v in flat(value, f"{prefix}{key}.").items()}
+
+    before, after = flat(old), flat(new)
+    return [f"{key}: {before.get(key, 'default')} -> {after.get(key, 'default')}"
+            for key in sorted(before.keys() | after.keys()) if before.get(key) != after.get(key)]
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

@@ -153,23 +153,7 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
         for role, names in BASELINES.items():
             players[role] += [Player(name=n, spec=n, role=role, identity=f"builtin:{n}") for n in names]
     for entry in paths:
-        path = Path(entry)
-        if family_of(entry) is not None or (path.is_file() and path.suffix.lower() not in (".zip", ".onnx")):
-            candidates = _policy_players(entry, scenario)
-        elif path.is_dir():
-            found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST and RESUME_DIR not in p.parts]
-            if not found:
-                raise PecliError(f"no checkpoints under {entry}")
-            candidates = [_checkpoint_player(p, scenario, skipped) for p in found]
-        elif path.is_file():
-            candidates = [_file_player(path, scenario, skipped)]
-            if candidates[0] is None:
-                raise PecliError(skipped[-1])
-        elif ":" in entry or entry in BUILTINS:
-            candidates = [_class_player(entry, scenario)]
-        else:
-            raise PecliError(f"no such file or folder: {entry}")
-        for player in candidates:
+        for player in _entry_players(entry, scenario, skipped):
             if player is not None and player.identity not in {p.identity for p in players[player.role]}:
                 players[player.role].append(player)
     for role in ROLES:
@@ -180,6 +164,38 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
             raise PecliError(f"no {role} to play: the tournament needs at least one of each side{hint}")
         players[role] = _unique_names(players[role])
     return Discovery(players=players, skipped=skipped)
+
+
+def _entry_players(entry: str, scenario: Scenario, skipped: list[str]) -> list[Player | None]:
+    """The players one entry of :func:`find_players` names (``None`` for a checkpoint skipped)."""
+    path = Path(entry)
+    if family_of(entry) is not None or (path.is_file() and path.suffix.lower() not in (".zip", ".onnx")):
+        return list(_policy_players(entry, scenario))
+    if path.is_dir():
+        found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST and RESUME_DIR not in p.parts]
+        if not found:
+            raise PecliError(f"no checkpoints under {entry}")
+        return [_checkpoint_player(p, scenario, skipped) for p in found]
+    if path.is_file():
+        player = _file_player(path, scenario, skipped)
+        if player is None:
+            raise PecliError(skipped[-1])
+        return [player]
+    if ":" in entry or entry in BUILTINS:
+        return [_class_player(entry, scenario)]
+    raise PecliError(f"no such file or folder: {entry}")
+
+
+def check_saved_players(entry: str, scenario: Scenario) -> None:
+    """For a checkpoint, an exported model or a folder of them: :class:`PecliError` unless it gives at least
+    one player of ``scenario`` (reads metadata only; other entries are not checked)."""
+    path = Path(entry)
+    if family_of(entry) is not None or not (path.is_dir() or path.suffix.lower() in (".zip", ".onnx")):
+        return
+    skipped: list[str] = []
+    if not any(player is not None for player in _entry_players(entry, scenario, skipped)):
+        raise PecliError(f"no checkpoint of scenario '{scenario.name}' under {entry}"
+                         + (f" ({len(skipped)} skipped, e.g. {skipped[0]})" if skipped else ""))
 
 
 def _class_player(spec: str, scenario: Scenario) -> Player:

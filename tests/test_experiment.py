@@ -77,6 +77,28 @@ def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, messag
     assert "\n" not in str(info.value)
 
 
+def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path) -> None:
+    import torch as th
+
+    from pecli.scenario import load_scenario
+    from test_export import make_checkpoint
+
+    th.set_num_threads(1)
+    other = make_checkpoint(tmp_path / "zoo", load_scenario("point_mass"), "none")  # another game than quick's
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "junk.zip").write_bytes(b"not a checkpoint")
+    for player, message in [(str(other), "trained on scenario 'point_mass', not 'quick'"),
+                            (str(tmp_path / "zoo"), "no checkpoint of scenario 'quick' under"),
+                            (str(tmp_path / "empty"), "no checkpoints under"),
+                            (str(tmp_path / "junk.zip"), "junk.zip")]:
+        path = write(tmp_path, {**SMOKE, "tournament": {"players": [player]}})
+        with pytest.raises(ConfigError, match=f"tournament.players.0: .*{message}") as info:
+            load_experiment(path)
+        assert "\n" not in str(info.value)
+    mine = make_checkpoint(tmp_path / "mine", load_scenario("quick"), "none")
+    assert load_experiment(write(tmp_path, {**SMOKE, "tournament": {"players": [str(mine)]}})).spec.tournament.players
+
+
 def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
     from pecli.scenario import builtin_config_dir
 

@@ -239,6 +239,7 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
     """Refuse, before any training, an opponent or tournament player that could not play: a name that is
     no policy, a role it cannot take, an ``hj`` player in a game that is not point mass vs point mass."""
     from pecli.policies.registry import BUILTINS, builtin_names, family_of
+    from pecli.tournament import check_saved_players
 
     one_role = [s for s in spec.runs.schedules if s not in SELFPLAY_SCHEDULES]
     if spec.runs.opponent is not None and one_role:
@@ -258,6 +259,10 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
         if family is None and player not in BUILTINS and ":" not in player and not Path(player).exists():
             raise ConfigError(f"{source}: tournament.players.{i}: unknown player '{player}' (a built-in policy such "
                               f"as {', '.join(builtin_names()[:4])}, a family such as hj, a file or module:Class)")
+        try:
+            check_saved_players(player, scenario)  # a checkpoint of another game, or a folder of none
+        except PecliError as exc:
+            raise ConfigError(f"{source}: tournament.players.{i}: {exc}") from None
 
 
 def load_experiment(name_or_path: str | Path) -> LoadedExperiment:

@@ -10,7 +10,11 @@ that is a capture scores -1), averages it over the opponent's inputs, and takes 
 lowest average (the pursuer) or the highest (the evader). Averages within :data:`TIE` of the best
 are ties, which the average distance one step after the outcome decides: the pursuer closes in,
 the evader draws away. That is also the whole rule where the score is flat, for example where
-the value cannot tell the inputs apart in the open plane of a relative model.
+the value cannot tell the inputs apart in the open plane of a relative model. Where some input
+forces a capture within :data:`FORCE_STEPS` steps whatever the evader does (its worst outcome over
+the evader's nine inputs says so), the pursuer rates every input by its worst outcome instead of the
+average, and so takes the forcing one: near the capture set an average lets the evader's one
+escaping input through.
 
 The state needs the opponent's position and velocity. While the opponent is seen they come from
 the observation. When it is not, the policy uses an estimate: the last sighting moved at its last
@@ -48,6 +52,8 @@ LEVELS = np.array([-1.0, 0.0, 1.0])  # normalised input per axis; the candidates
 INPUTS = np.array([(x, y) for x in LEVELS for y in LEVELS])  # (9, 2), row 3 i + j = (LEVELS[i], LEVELS[j])
 TIE = 1e-3  # score differences below this are ties (steps, or m of closest approach)
 CAPTURED = -1.0  # the score of an outcome that is a capture: better than any state
+FORCE_STEPS = 10.0  # where the worst case forces a capture within this many steps, the pursuer plays it
+RULES = 2  # the players' rule, in their identity: results cached under an older rule are not reused
 
 
 def _pair_norm(gap: np.ndarray) -> np.ndarray:
@@ -60,6 +66,15 @@ def choose(scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
     are ties, and the lowest distance ``(n, k)`` among them wins."""
     tied = scores <= scores.min(axis=1, keepdims=True) + TIE
     return np.argmin(np.where(tied, distances, np.inf), axis=1)
+
+
+def pursuer_choice(scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray) -> np.ndarray:
+    """The pursuer's input ``(n,)`` from the scores and distances ``(n, 9 own, 9 evader inputs)``: the best
+    average over the evader's inputs, or, in a game of ``mutual`` sight where some input forces a capture
+    within :data:`FORCE_STEPS` steps against every evader input, the best worst case."""
+    worst = scores.max(axis=2)
+    forced = mutual & (worst.min(axis=1) <= FORCE_STEPS)
+    return choose(np.where(forced[:, None], worst, scores.mean(axis=2)), distances.mean(axis=2))
 
 
 class HJPolicy(HeuristicPolicy):
@@ -101,7 +116,7 @@ class HJPolicy(HeuristicPolicy):
         self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
         self.opponent = self.dynamics[opponent_of(role)]
         self.half = np.array(scenario.arena.half)
-        self.identity = f"hj:{solution.key}" + (f":belief:{belief_id}" if belief is not None else "")
+        self.identity = f"hj:{solution.key}:rules{RULES}" + (f":belief:{belief_id}" if belief is not None else "")
 
     # ------------------------------------------------------------------ memory
     def _allocate(self, n: int) -> None:
@@ -135,9 +150,10 @@ class HJPolicy(HeuristicPolicy):
         opp = np.concatenate([opp_pos, opp_vel], axis=1).T
         pursuer, evader = (own, opp) if self.role == "pursuer" else (opp, own)
         scores, distances = self.outcomes(pursuer, evader)
-        scores[~self._mutual(view)] = 0.0  # only the distance decides (see the module)
+        mutual = self._mutual(view)
+        scores[~mutual] = 0.0  # only the distance decides (see the module)
         if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
-            return INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))]
+            return INPUTS[pursuer_choice(scores, distances, mutual)]
         return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
 
     def outcomes(self, pursuer: np.ndarray, evader: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -99,6 +99,23 @@ def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path
     assert load_experiment(write(tmp_path, {**SMOKE, "tournament": {"players": [str(mine)]}})).spec.tournament.players
 
 
+def test_the_training_left_is_estimated_from_the_finished_runs_of_each_kind() -> None:
+    from pecli.experiment.runs import RunProgress, training_left
+
+    experiment = experiment_from_dict({**SMOKE, "runs": {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1, 2]}},
+                                      "exp.yaml")
+    runs = {run.name: run for run in experiment.runs()}
+    progress = {name: RunProgress(0, 2, 0, 0.0, False) for name in runs}
+    progress["none-s0"] = RunProgress(2, 2, 0, 100.0, True)
+    progress["none-s1"] = RunProgress(2, 2, 0, 140.0, True)
+    progress["none-s2"] = RunProgress(1, 2, 0, 30.0, False)  # mean 120, 30 used: 90 left
+    pairs = [(runs[name], progress[name]) for name in runs]
+    assert training_left(pairs) == (90.0, 3)  # no bimdn run has finished: those 3 are not counted
+    progress["bimdn-s0"] = RunProgress(2, 2, 0, 400.0, True)
+    progress["bimdn-s1"] = RunProgress(2, 2, 0, 450.0, False)  # past the mean: nothing left, not less
+    assert training_left([(runs[name], progress[name]) for name in runs]) == (90.0 + 400.0, 0)
+
+
 def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
     from pecli.scenario import builtin_config_dir
 

@@ -145,6 +145,7 @@ def run(
 def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
     """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
     from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, statuses
+    from pecli.experiment.runs import training_left
 
     loaded = open_experiment(out)
     state = read_state(out)
@@ -160,7 +161,12 @@ def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (it
         console.print(f"report: {out / 'report.md'}", highlight=False)
     done = sum(row.status == "done" for row in rows)
     cpu = sum(row.progress.cpu_seconds for row in rows)
-    console.print(f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training", highlight=False)
+    left, unknown = training_left([(row.run, row.progress) for row in rows])
+    estimate = ""
+    if done < len(rows) and unknown < len(rows) - done:
+        estimate = (f"; about {left / 3600:.1f} CPU-hours left, by the finished runs of each kind"
+                    + (f" ({unknown} runs of kinds not finished yet not counted)" if unknown else ""))
+    console.print(f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training{estimate}", highlight=False)
 
 
 @app.command()

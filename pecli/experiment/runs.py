@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -69,6 +70,26 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     if not done:
         role = "pursuer" if (rounds + 1, "pursuer") not in finished else "evader"
     return RunProgress(rounds, planned, steps, cpu, done, role)
+
+
+def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, int]:
+    """An estimate of the CPU seconds the unfinished runs still need: for each, the mean CPU time of the
+    finished runs of its kind and schedule, less what it has used. Returns ``(seconds, runs)``, ``runs``
+    counting the unfinished runs left out for want of a finished run like them."""
+    spent: dict[tuple[str, str], list[float]] = {}
+    for run, progress in runs:
+        if progress.done:
+            spent.setdefault((run.kind, run.schedule), []).append(progress.cpu_seconds)
+    seconds, unknown = 0.0, 0
+    for run, progress in runs:
+        if progress.done:
+            continue
+        finished = spent.get((run.kind, run.schedule))
+        if finished:
+            seconds += max(0.0, sum(finished) / len(finished) - progress.cpu_seconds)
+        else:
+            unknown += 1
+    return seconds, unknown
 
 
 def cpu_through(turns: list[dict[str, Any]], round: int) -> float:

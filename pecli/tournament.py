@@ -83,18 +83,24 @@ class Discovery:
     skipped: list[str]
 
 
-def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
+def _unplayable(path: Path, scenario: Scenario) -> str | None:
+    """Why the checkpoint at ``path`` cannot play ``scenario`` (reading its metadata only), or ``None``."""
     try:
         meta = read_metadata(path)
     except ZooError as exc:
-        skipped.append(str(exc))
-        return None
+        return str(exc)
     if problem := checkpoint_problem(path):
-        skipped.append(f"{path}: {problem}")
-        return None
+        return f"{path}: {problem}"
     if meta.scenario_hash != scenario.fingerprint():
-        skipped.append(f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'")
+        return f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'"
+    return None
+
+
+def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
+    if problem := _unplayable(path, scenario):
+        skipped.append(problem)
         return None
+    meta = read_metadata(path)
     name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
     return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=file_digest(path))
 
@@ -172,10 +178,7 @@ def _entry_players(entry: str, scenario: Scenario, skipped: list[str]) -> list[P
     if family_of(entry) is not None or (path.is_file() and path.suffix.lower() not in (".zip", ".onnx")):
         return list(_policy_players(entry, scenario))
     if path.is_dir():
-        found = [p for p in sorted(path.rglob("*.zip")) if p.stem != LAST and RESUME_DIR not in p.parts]
-        if not found:
-            raise PecliError(f"no checkpoints under {entry}")
-        return [_checkpoint_player(p, scenario, skipped) for p in found]
+        return [_checkpoint_player(p, scenario, skipped) for p in _checkpoints_under(path)]
     if path.is_file():
         player = _file_player(path, scenario, skipped)
         if player is None:
@@ -186,16 +189,32 @@ def _entry_players(entry: str, scenario: Scenario, skipped: list[str]) -> list[P
     raise PecliError(f"no such file or folder: {entry}")
 
 
+def _checkpoints_under(folder: Path) -> list[Path]:
+    """The checkpoints in ``folder`` and below that can be players (not ``last`` or a run's durable state)."""
+    found = [p for p in sorted(folder.rglob("*.zip")) if p.stem != LAST and RESUME_DIR not in p.parts]
+    if not found:
+        raise PecliError(f"no checkpoints under {folder}")
+    return found
+
+
 def check_saved_players(entry: str, scenario: Scenario) -> None:
-    """For a checkpoint, an exported model or a folder of them: :class:`PecliError` unless it gives at least
-    one player of ``scenario`` (reads metadata only; other entries are not checked)."""
+    """For a checkpoint, an exported model or a folder of checkpoints: :class:`PecliError` unless it gives at
+    least one player of ``scenario``. Reads metadata only, and a folder up to its first good checkpoint;
+    other entries are not checked."""
     path = Path(entry)
-    if family_of(entry) is not None or not (path.is_dir() or path.suffix.lower() in (".zip", ".onnx")):
+    if family_of(entry) is not None:
         return
-    skipped: list[str] = []
-    if not any(player is not None for player in _entry_players(entry, scenario, skipped)):
-        raise PecliError(f"no checkpoint of scenario '{scenario.name}' under {entry}"
-                         + (f" ({len(skipped)} skipped, e.g. {skipped[0]})" if skipped else ""))
+    if path.is_dir():
+        problems = []
+        for checkpoint in _checkpoints_under(path):
+            problem = _unplayable(checkpoint, scenario)
+            if problem is None:
+                return
+            problems.append(problem)
+        raise PecliError(f"no checkpoint of scenario '{scenario.name}' under {entry} "
+                         f"({len(problems)} skipped, e.g. {problems[0]})")
+    if path.suffix.lower() in (".zip", ".onnx"):
+        _entry_players(entry, scenario, [])  # one file: PecliError with the reason it cannot play
 
 
 def _class_player(spec: str, scenario: Scenario) -> Player:

@@ -151,6 +151,12 @@ def test_an_edited_scenario_under_an_experiment_is_refused(tmp_path: Path) -> No
     (out / SCENARIO_FILE).unlink()  # an experiment from before pecli recorded its scenario: recorded now
     prepare()
     assert (out / SCENARIO_FILE).is_file()
+    game.write_text(game.read_text().replace("description:", "description: edited,"))
+    prepare()  # the name and description are no part of the game
+    recorded = yaml.safe_load((out / SCENARIO_FILE).read_text())
+    del recorded["training"]["batch_size"]  # a setting pecli added after the experiment started: its default
+    (out / SCENARIO_FILE).write_text(yaml.safe_dump(recorded))
+    prepare()
 
 
 def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -247,8 +248,21 @@ def test_where_a_capture_can_be_forced_the_pursuer_forces_it() -> None:
     mutual = np.array([True, False, True])
     scores[2] += 20.0  # game 2: nothing is forced within FORCE_STEPS
     assert scores[0, 0].mean() < scores[0, 1].mean() and 8.0 <= FORCE_STEPS < 22.0
-    assert list(pursuer_choice(scores, distances, mutual)) == [1, 0, 0]  # an unseen evader: the average
+    scores[1] = 0.0  # an evader out of mutual sight: the policy leaves the choice to the distance
+    assert list(pursuer_choice(scores, distances, mutual)) == [1, 0, 0]
+    scores[1] = scores[0]
+    assert list(pursuer_choice(scores, distances, mutual)) == [1, 0, 0]  # unseen: the average, whatever the scores
     assert list(choose(scores.mean(axis=2), distances.mean(axis=2))) == [0, 0, 0]  # the rule before
+    assert list(pursuer_choice(scores, distances, mutual, force=5.0)) == [0, 0, 0]  # a horizon of 5 steps: not forced
+
+
+def test_the_forced_capture_threshold_is_within_the_solutions_horizon(coarse: Solution, point_mass: Scenario) -> None:
+    """Past a solution's horizon a score is horizon + 1 + closest approach: with a short horizon that can be under
+    FORCE_STEPS without any capture forced."""
+    assert HJPolicy(point_mass, "pursuer", coarse).force == min(FORCE_STEPS, coarse.problem.steps)
+    short = replace(coarse, problem=replace(coarse.problem, steps=4))
+    assert HJPolicy(point_mass, "pursuer", short).force == 4
+    assert HJPolicy(point_mass, "pursuer", replace(coarse, capture_steps=None)).force == 0.0  # scored by V
 
 
 def test_the_arena_model_knows_the_walls(arena: Solution, coarse: Solution) -> None:

@@ -131,8 +131,29 @@ def test_a_trial_with_repeats_trains_on_each_seed_and_scores_their_mean(quick: S
 @pytest.mark.parametrize("option", ["--repeats", "--cpu-minutes", "--evaluations", "--eval-episodes"])
 def test_zero_budgets_are_refused_not_taken_for_the_default(tmp_path: Path, option: str) -> None:
     result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", option, "0", "--dir", str(tmp_path)])
-    assert result.exit_code == 1 and f"{option}" in result.output and "must be positive" in result.output, result.output
+    assert result.exit_code == 1 and f"{option} must be positive, not 0" in result.output, result.output
     assert not (tmp_path / "studies.db").exists()
+
+
+def test_a_selfplay_runs_reports_take_one_step_per_round_so_the_next_run_never_reuses_them(quick: Scenario) -> None:
+    """A self-play run evaluates after each round, more often than --evaluations when it has more rounds:
+    the next run's steps start after its rounds (Optuna ignores a second value at a step)."""
+    space = {**SMALL, "fixed": {**SMALL["fixed"], "selfplay.rounds": 4}}
+    objective = tune.Objective(settings(quick, "selfplay", space=space, repeats=2, evaluations=2), Path("."))
+    runs: list[list[float]] = [[0.2, 0.4, 0.6, 0.8], [0.1, 0.3]]  # 4 rounds, then a run stopped by the budget
+
+    def selfplay(trial, scenario, seed, clock, report):  # type: ignore[no-untyped-def]
+        values = runs.pop(0)
+        for k, value in enumerate(values, 1):
+            report(k, value)
+        return values[-1]
+
+    objective._selfplay = selfplay  # type: ignore[method-assign]
+    study = optuna.create_study(direction="maximize")
+    study.optimize(objective, n_trials=1)
+    steps = study.trials[0].intermediate_values
+    assert steps == pytest.approx({1: 0.2, 2: 0.4, 3: 0.6, 4: 0.8, 5: 0.45, 6: 0.55})  # run 2 from step 5, mean with 0.8
+    assert study.trials[0].value == pytest.approx(0.55)
 
 
 def test_repeats_are_kept_on_resume(tmp_path: Path) -> None:

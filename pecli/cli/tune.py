@@ -77,8 +77,9 @@ def _tune(what: str, **options: Any) -> None:
             opponent=opponent, eval_opponents=evaluated, pruner=(o["pruner"] or PrunerChoice.median).value,
             space_text=text, **{"cpu_minutes": 3.0, **given},
         )
-        if min(settings.cpu_minutes, settings.evaluations, settings.eval_episodes, settings.repeats) <= 0:
-            raise PecliError("--cpu-minutes, --evaluations, --eval-episodes and --repeats must be positive")
+        for option in ("cpu_minutes", "evaluations", "eval_episodes", "repeats"):
+            if getattr(settings, option) <= 0:
+                raise PecliError(f"--{option.replace('_', '-')} must be positive, not {getattr(settings, option):g}")
         if not 0 <= settings.seed < 2**32:
             raise PecliError("--seed must be between 0 and 2**32 - 1")
         _check_opponents(settings, scenario)
@@ -130,9 +131,10 @@ def _command(what: str, doc: str) -> Any:
                                                            "learner is scored against (default: --opponent).")] = None,
         trials: Annotated[int | None, typer.Option("--trials", "-n", help="Trials the study has when done (complete "
                                                    "or pruned; default 30).")] = None,
-        cpu_minutes: Annotated[float | None, typer.Option("--cpu-minutes", help="CPU budget of a trial (default 3).")] = None,
-        evaluations: Annotated[int | None, typer.Option("--evaluations", help="Evaluations per trial, evenly over its "
-                                                        "budget, reported to the pruner (default 6).")] = None,
+        cpu_minutes: Annotated[float | None, typer.Option("--cpu-minutes", help="CPU budget of a training run "
+                                                          "(a trial has --repeats of them; default 3).")] = None,
+        evaluations: Annotated[int | None, typer.Option("--evaluations", help="Evaluations per training run, evenly "
+                                                        "over its budget, reported to the pruner (default 6).")] = None,
         eval_episodes: Annotated[int | None, typer.Option("--eval-episodes", help="Games per opponent and evaluation "
                                                           "(default 200).")] = None,
         jobs: Annotated[int, typer.Option("--jobs", "-j", help="Trials run in parallel processes, one torch thread "
@@ -145,8 +147,8 @@ def _command(what: str, doc: str) -> Any:
         pruner: Annotated[PrunerChoice | None, typer.Option("--pruner", help="median (default), halving "
                                                             "(successive halving) or none.")] = None,
         seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of trial 0 (trial i trains with "
-                                                 "seed + i; default 0).")] = None,
-        repeats: Annotated[int | None, typer.Option("--repeats", "-r", help="Training runs per trial, each on its "
+                                                 "seed + i, or seed + i*R with --repeats R; default 0).")] = None,
+        repeats: Annotated[int | None, typer.Option("--repeats", help="Training runs per trial, each on its "
                                                     "own seed (trial i: seed + i*R ... seed + i*R + R-1), each "
                                                     "with --cpu-minutes; the trial scores their mean (default 1)."
                                                     )] = None,

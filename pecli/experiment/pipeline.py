@@ -168,14 +168,15 @@ class ExperimentRunner:
                                  "give another --out (or the same experiment file to continue it)")
             if driver_alive(state):
                 raise PecliError(f"{self.out} is being run by process {state['driver']['pid']}: wait for it, or stop it")
-        scenario = self.experiment.scenario.model_dump(mode="json", exclude_defaults=True)
+        scenario = self.experiment.scenario.model_dump(mode="json", exclude={"name", "description"})
         recorded = self.out / SCENARIO_FILE
         if state and recorded.is_file():
             changed = changes(read_yaml(recorded), scenario)
             if changed:
                 more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
                 raise PecliError(f"the scenario '{spec.scenario}' has changed since {self.out} started "
-                                 f"({changed[0]}{more}; as first run: {recorded}): restore it, or give another --out")
+                                 f"({changed[0]}{more}; as first run: {recorded}): restore it (or the pecli "
+                                 "that ran it), or give another --out")
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "tasks").mkdir(exist_ok=True)
         atomic_write_text(self.out / SPEC_FILE, yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
@@ -369,7 +370,8 @@ class ExperimentRunner:
 
 
 def changes(old: Any, new: dict[str, Any]) -> list[str]:
-    """The settings that differ between two scenario dumps, as ``key: old -> new`` (dotted keys)."""
+    """The settings of the recorded scenario dump ``old`` that differ in ``new``, as ``key: old -> new``
+    (dotted keys). A setting ``old`` lacks (one added to pecli since) is not a change: it has its default."""
 
     def flat(data: Any, prefix: str = "") -> dict[str, Any]:
         if not isinstance(data, dict) or not data:
@@ -377,8 +379,8 @@ def changes(old: Any, new: dict[str, Any]) -> list[str]:
         return {k: v for key, value in data.items() for k, v in flat(value, f"{prefix}{key}.").items()}
 
     before, after = flat(old), flat(new)
-    return [f"{key}: {before.get(key, 'default')} -> {after.get(key, 'default')}"
-            for key in sorted(before.keys() | after.keys()) if before.get(key) != after.get(key)]
+    return [f"{key}: {before[key]} -> {after.get(key, '(no such setting)')}"
+            for key in sorted(before) if before[key] != after.get(key, object())]
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

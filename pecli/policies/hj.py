@@ -68,12 +68,13 @@ def choose(scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
     return np.argmin(np.where(tied, distances, np.inf), axis=1)
 
 
-def pursuer_choice(scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray) -> np.ndarray:
+def pursuer_choice(scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray,
+                   force: float = FORCE_STEPS) -> np.ndarray:
     """The pursuer's input ``(n,)`` from the scores and distances ``(n, 9 own, 9 evader inputs)``: the best
-    average over the evader's inputs, or, in a game of ``mutual`` sight where some input forces a capture
-    within :data:`FORCE_STEPS` steps against every evader input, the best worst case."""
+    average over the evader's inputs, or, in a game of ``mutual`` sight where some input's score is at most
+    ``force`` (a capture within that many steps) against every evader input, the best worst case."""
     worst = scores.max(axis=2)
-    forced = mutual & (worst.min(axis=1) <= FORCE_STEPS)
+    forced = mutual & (worst.min(axis=1) <= force)
     return choose(np.where(forced[:, None], worst, scores.mean(axis=2)), distances.mean(axis=2))
 
 
@@ -112,6 +113,9 @@ class HJPolicy(HeuristicPolicy):
         self.solution = solution
         self.grid = solution.grid
         self.scores = solution.scores()
+        # a score at most this is a forced capture: capture steps within the solution's horizon, or, for a
+        # solution scored by its value alone (no capture steps), a state in the capture set
+        self.force = min(FORCE_STEPS, solution.problem.steps) if solution.capture_steps is not None else 0.0
         self.belief = belief
         self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
         self.opponent = self.dynamics[opponent_of(role)]
@@ -153,7 +157,7 @@ class HJPolicy(HeuristicPolicy):
         mutual = self._mutual(view)
         scores[~mutual] = 0.0  # only the distance decides (see the module)
         if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
-            return INPUTS[pursuer_choice(scores, distances, mutual)]
+            return INPUTS[pursuer_choice(scores, distances, mutual, self.force)]
         return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
 
     def outcomes(self, pursuer: np.ndarray, evader: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

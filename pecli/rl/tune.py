@@ -246,13 +246,15 @@ class Objective:
         scenario = with_overrides(self.scenario, overrides, source=f"trial {trial.number}")
         s = self.settings
         train = self._selfplay if s.what == "selfplay" else self._one_role
+        # the steps one run reports: its evaluations, or in self-play one per round (at most its rounds)
+        stride = max(s.evaluations, scenario.training.selfplay.rounds) if s.what == "selfplay" else s.evaluations
         scores: list[float] = []
         start = time.process_time()
         try:
             for i in range(s.repeats):
                 seed = s.seed + trial.number * s.repeats + i  # trial n's seeds: no other trial of the study uses them
                 scores.append(train(trial, scenario, seed, Clock(time.process_time(), s.budget_s, s.evaluations),
-                                    _Reporter(trial, scores, s.evaluations)))
+                                    _Reporter(trial, scores, stride)))
         finally:
             trial.set_user_attr("cpu_seconds", round(time.process_time() - start, 2))
             trial.set_user_attr("scores", scores)
@@ -331,17 +333,17 @@ class Objective:
 class _Reporter:
     """Tells Optuna a trial's evaluations; raises :class:`optuna.TrialPruned` if the pruner stops the trial.
 
-    Evaluation ``k`` of the trial's run ``i`` (``i`` earlier runs scored in ``scores``) is step
-    ``i * evaluations + k``, and its value is the mean of the earlier runs' scores and this evaluation,
-    so that the last value reported is the trial's score and trials compare step by step."""
+    Evaluation ``k`` (1 to ``stride``) of the trial's run ``i`` (``i`` earlier runs scored in ``scores``)
+    is step ``i * stride + k``, and its value is the mean of the earlier runs' scores and this
+    evaluation, so that the last value reported is the trial's score and trials compare step by step."""
 
-    def __init__(self, trial: optuna.Trial, scores: list[float], evaluations: int) -> None:
-        self.trial, self.scores, self.evaluations = trial, scores, evaluations
+    def __init__(self, trial: optuna.Trial, scores: list[float], stride: int) -> None:
+        self.trial, self.scores, self.stride = trial, scores, stride
 
     def __call__(self, k: int, score: float) -> None:
         i = len(self.scores)
         value = (sum(self.scores) + score) / (i + 1)
-        self.trial.report(value, i * self.evaluations + k)
+        self.trial.report(value, i * self.stride + k)
         if self.trial.should_prune():
             raise optuna.TrialPruned(f"run {i + 1}, evaluation {k}: {score:.3f} (mean {value:.3f})")
 

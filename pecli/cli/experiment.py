@@ -33,12 +33,27 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.1f} min" if seconds else "-"
 
 
+def progress_line(rows: list[RunStatus]) -> str:
+    """``8/15 runs done, 3.93 CPU-hours of training; about 2.6 CPU-hours left, ...``: the estimate takes
+    each unfinished run to need what the finished runs of its kind and schedule took."""
+    from pecli.experiment.runs import training_left
+
+    done = sum(row.progress.done for row in rows)
+    cpu = sum(row.progress.cpu_seconds for row in rows)
+    left, unknown = training_left([(row.run, row.progress) for row in rows])
+    estimate = ""
+    if done < len(rows) and unknown < len(rows) - done:
+        estimate = (f"; about {left / 3600:.1f} CPU-hours left, by the finished runs of each kind"
+                    + (f" ({unknown} runs of kinds not finished yet not counted)" if unknown else ""))
+    return f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training{estimate}"
+
+
 def runs_table(rows: list[RunStatus], title: str) -> Table:
     """One row per run: kind, seed, schedule (when the grid has several), round, transitions, CPU time,
-    status, and the host it runs on (when another machine ran any)."""
+    status, and the host it runs on (when another machine ran any); below it, :func:`progress_line`."""
     schedules = len({row.run.schedule for row in rows}) > 1
     hosts = any(row.host not in ("", socket.gethostname()) for row in rows)
-    table = Table(title=title, title_justify="left")
+    table = Table(title=title, title_justify="left", caption=progress_line(rows), caption_justify="left")
     table.add_column("run", no_wrap=True)
     table.add_column("kind", no_wrap=True)
     table.add_column("seed", justify="right")
@@ -145,7 +160,6 @@ def run(
 def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
     """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
     from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, statuses
-    from pecli.experiment.runs import training_left
 
     loaded = open_experiment(out)
     state = read_state(out)
@@ -159,14 +173,6 @@ def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (it
             console.print(f"{name}: {stage.get('status')}, {stage.get('pairings')} pairings", highlight=False)
     if stages.get("report") == "done":
         console.print(f"report: {out / 'report.md'}", highlight=False)
-    done = sum(row.status == "done" for row in rows)
-    cpu = sum(row.progress.cpu_seconds for row in rows)
-    left, unknown = training_left([(row.run, row.progress) for row in rows])
-    estimate = ""
-    if done < len(rows) and unknown < len(rows) - done:
-        estimate = (f"; about {left / 3600:.1f} CPU-hours left, by the finished runs of each kind"
-                    + (f" ({unknown} runs of kinds not finished yet not counted)" if unknown else ""))
-    console.print(f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training{estimate}", highlight=False)
 
 
 @app.command()

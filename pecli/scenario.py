@@ -351,15 +351,18 @@ class Scenario(_Model):
         """What makes ``other`` another game (what :meth:`fingerprint` covers): ``[(key, ours, theirs)]``,
         e.g. ``[("horizon", 150, 200)]``."""
 
-        def flat(data: Any, prefix: str = "") -> dict[str, Any]:
-            if not isinstance(data, dict):
-                return {prefix.rstrip("."): data}
-            return {k: v for key, value in data.items() for k, v in flat(value, f"{prefix}{key}.").items()}
-
         exclude = {"name", "description", "training"}
-        ours, theirs = (flat(s.model_dump(exclude=exclude, mode="json")) for s in (self, other))
+        ours, theirs = (dotted(s.model_dump(exclude=exclude, mode="json")) for s in (self, other))
         return [(key, ours.get(key), theirs.get(key)) for key in sorted(ours.keys() | theirs.keys())
                 if ours.get(key) != theirs.get(key)]
+
+
+def dotted(data: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested mapping as ``{"dotted.key": leaf}`` (an empty mapping, or anything else, is a leaf):
+    ``{"arena": {"width": 8.0}}`` -> ``{"arena.width": 8.0}``."""
+    if not isinstance(data, dict) or not data:
+        return {prefix.rstrip("."): data}
+    return {k: v for key, value in data.items() for k, v in dotted(value, f"{prefix}{key}.").items()}
 
 
 def builtin_config_dir() -> Path:

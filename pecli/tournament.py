@@ -39,7 +39,7 @@ from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, RESUME_DIR, ZooError, checkpoint_problem, read_metadata
+from pecli.zoo import LAST, RESUME_DIR, CheckpointMeta, ZooError, checkpoint_problem, read_metadata
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
@@ -83,8 +83,8 @@ class Discovery:
     skipped: list[str]
 
 
-def _unplayable(path: Path, scenario: Scenario) -> str | None:
-    """Why the checkpoint at ``path`` cannot play ``scenario`` (reading its metadata only), or ``None``."""
+def _playable_meta(path: Path, scenario: Scenario) -> CheckpointMeta | str:
+    """The metadata of the checkpoint at ``path`` if it can play ``scenario``, else why not (reads metadata only)."""
     try:
         meta = read_metadata(path)
     except ZooError as exc:
@@ -93,14 +93,14 @@ def _unplayable(path: Path, scenario: Scenario) -> str | None:
         return f"{path}: {problem}"
     if meta.scenario_hash != scenario.fingerprint():
         return f"{path}: trained on scenario '{meta.scenario}', not '{scenario.name}'"
-    return None
+    return meta
 
 
 def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
-    if problem := _unplayable(path, scenario):
-        skipped.append(problem)
+    meta = _playable_meta(path, scenario)
+    if isinstance(meta, str):
+        skipped.append(meta)
         return None
-    meta = read_metadata(path)
     name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
     return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=file_digest(path))
 
@@ -207,10 +207,10 @@ def check_saved_players(entry: str, scenario: Scenario) -> None:
     if path.is_dir():
         problems = []
         for checkpoint in _checkpoints_under(path):
-            problem = _unplayable(checkpoint, scenario)
-            if problem is None:
+            meta = _playable_meta(checkpoint, scenario)
+            if not isinstance(meta, str):
                 return
-            problems.append(problem)
+            problems.append(meta)
         raise PecliError(f"no checkpoint of scenario '{scenario.name}' under {entry} "
                          f"({len(problems)} skipped, e.g. {problems[0]})")
     if path.suffix.lower() in (".zip", ".onnx"):

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 import torch as th
 
@@ -40,3 +44,15 @@ def keep_torch_threads():
     threads = th.get_num_threads()
     yield
     th.set_num_threads(threads)
+
+
+def hold(folder: Path, code: str = "from pecli.locks import acquire; acquire({folder!r}, 'x')") -> subprocess.Popen:
+    """A process that takes ``folder``'s lock (exit code 3 if refused), says so, and sleeps."""
+    script = ("import sys, time\nfrom pecli.locks import FolderLocked\ntry:\n    "
+              + code.format(folder=str(folder)) + "\nexcept FolderLocked:\n    sys.exit(3)\n"
+              "print('locked', flush=True)\ntime.sleep(120)\n")
+    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    line = process.stdout.readline().strip()
+    if line != "locked":
+        process.wait()
+    return process

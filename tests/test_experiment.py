@@ -21,6 +21,8 @@ from pecli.experiment import ExperimentRunner, builtin_experiments, load_experim
 from pecli.experiment.runs import SELFPLAY_STATE, run_progress
 from pecli.experiment.spec import experiment_from_dict
 
+from conftest import hold
+
 runner = CliRunner()
 
 SMOKE = {
@@ -175,11 +177,9 @@ def test_one_driver_per_out_folder(tmp_path: Path) -> None:
     """Another process writing --out (an OS lock, whatever its PID record says) refuses a second driver."""
     out = tmp_path / "out"
     out.mkdir()
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from pecli.locks import acquire; "
-                               f"acquire({str(out)!r}, 'x'); print('held', flush=True); time.sleep(60)"],
-                              stdout=subprocess.PIPE, text=True)
+    holder = hold(out)
     try:
-        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert holder.poll() is None  # it holds the lock
         result = runner.invoke(app, ["experiment", "run", "smoke", "--out", str(out)])
         assert result.exit_code == 1 and f"is being written by process {holder.pid}" in result.output
         assert not (out / "experiment.json").exists()

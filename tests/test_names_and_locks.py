@@ -17,6 +17,8 @@ from pecli.rl.train import default_run_name
 from pecli.scenario import Scenario
 from pecli.zoo import Run, ZooError, check_run_name
 
+from conftest import hold
+
 runner = CliRunner()
 TINY = ["--set", "learning_starts=4", "--set", "n_envs=2", "--set", "net_arch=[8]", "--set", "buffer_size=100",
         "--set", "batch_size=4", "-q"]
@@ -78,18 +80,6 @@ def test_the_lock_is_reentrant_in_a_process_and_released_by_the_last_taker(tmp_p
         holder.wait()
     with locked(tmp_path, "x"):  # the OS dropped the killed holder's lock
         pass
-
-
-def hold(folder: Path, code: str = "from pecli.locks import acquire; acquire({folder!r}, 'x')") -> subprocess.Popen:
-    """A process that takes ``folder``'s lock (exit code 3 if refused), says so, and sleeps."""
-    script = ("import sys, time\nfrom pecli.locks import FolderLocked\ntry:\n    "
-              + code.format(folder=str(folder)) + "\nexcept FolderLocked:\n    sys.exit(3)\n"
-              "print('locked', flush=True)\ntime.sleep(120)\n")
-    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    line = process.stdout.readline().strip()
-    if line != "locked":
-        process.wait()
-    return process
 
 
 def test_a_run_has_one_writer(tmp_path: Path, quick: Scenario) -> None:

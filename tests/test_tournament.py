@@ -207,16 +207,13 @@ def test_a_killed_tournament_leaves_no_worker_behind(tmp_path: Path, signal_name
 
 
 def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick: Scenario) -> None:
-    import subprocess
-    import sys
+    from conftest import hold
 
     out = tmp_path / "t"
     out.mkdir()
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from pecli.locks import acquire; "
-                               f"acquire({str(out)!r}, 'x'); print('locked', flush=True); time.sleep(120)"],
-                              stdout=subprocess.PIPE, text=True)
+    holder = hold(out)
     try:
-        assert holder.stdout.readline().strip() == "locked"
+        assert holder.poll() is None  # it holds the lock
         result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1",
                                      "--workers", "1", "--out", str(out)])
         assert result.exit_code == 1, result.output

@@ -35,7 +35,7 @@ from pecli.experiment.runs import RunProgress, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.roles import ROLES
-from pecli.scenario import read_yaml
+from pecli.scenario import dotted, read_yaml
 
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster
@@ -372,13 +372,7 @@ class ExperimentRunner:
 def changes(old: Any, new: dict[str, Any]) -> list[str]:
     """The settings of the recorded scenario dump ``old`` that differ in ``new``, as ``key: old -> new``
     (dotted keys). A setting ``old`` lacks (one added to pecli since) is not a change: it has its default."""
-
-    def flat(data: Any, prefix: str = "") -> dict[str, Any]:
-        if not isinstance(data, dict) or not data:
-            return {prefix.rstrip("."): data}
-        return {k: v for key, value in data.items() for k, v in flat(value, f"{prefix}{key}.").items()}
-
-    before, after = flat(old), flat(new)
+    before, after = dotted(old), dotted(new)
     return [f"{key}: {before[key]} -> {after.get(key, '(no such setting)')}"
             for key in sorted(before) if before[key] != after.get(key, object())]
 

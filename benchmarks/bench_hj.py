@@ -3,6 +3,7 @@
     python benchmarks/bench_hj.py solve            # solve time, CPU, peak memory, accuracy of every model
     python benchmarks/bench_hj.py causes           # the old players' weakness, one suspected cause at a time
     python benchmarks/bench_hj.py matrix --pursuer P.zip --evader E.zip    # full and partial observation
+        [--full-pursuer P.zip --full-evader E.zip]                        # players of the full-information game
     python benchmarks/bench_hj.py table2 --pursuer P.zip --evader E.zip    # Table II by the documented commands
     python benchmarks/bench_hj.py solve --quick    # small grids and horizons, a smoke run
 
@@ -27,8 +28,9 @@ pursuit towards the closest approach, or a flight from it).
 ``matrix``: the default ``hj`` players (abs8d) and the others (``hj:model=rel4d``, the heuristics,
 "chase", the learned checkpoints given) in a capture matrix of 500 games per cell (seed 0), under
 full observation (sensor ranges 30 m; a learned player keeps the 3.75 m sensor it was trained
-with, since a checkpoint only plays the game it learned, while its opponent sees it everywhere)
-and under ``point_mass.yaml`` (3.75 m). ``table2`` runs the command sequence of docs/hj.md
+with, since a checkpoint only plays the game it learned, while its opponent sees it everywhere;
+``--full-pursuer``/``--full-evader`` add players trained on ``point_mass_full.yaml``, which see
+everywhere too) and under ``point_mass.yaml`` (3.75 m). ``table2`` runs the command sequence of docs/hj.md
 (``pecli hj solve``, ``pecli tournament``, ``pecli hj table``) and prints the table beside the paper's.
 """
 
@@ -335,6 +337,12 @@ def players(args: argparse.Namespace, base: Scenario) -> dict[str, list[tuple[st
     return out
 
 
+def full_players(args: argparse.Namespace) -> dict[str, list[tuple[str, str]]]:
+    """The learned players trained under full observation (``point_mass_full.yaml``), per role."""
+    return {role: [(f"learned full ({Path(path).parent.parent.name})", str(path))] if path else []
+            for role, path in (("pursuer", args.full_pursuer), ("evader", args.full_evader))}
+
+
 def make_player(spec: str, role: str, scenario: Scenario, base: Scenario, seed: int):
     if spec == "chase":
         return Chase(scenario, role, solution_for(base, "rel4d"))
@@ -345,20 +353,25 @@ def matrix(args: argparse.Namespace) -> None:
     base = load_scenario("point_mass")
     solution_for(base, "abs8d")
     solution_for(base, "rel4d")
-    roster = players(args, base)
+    limited, full = players(args, base), full_players(args)
+    # the checkpoints that keep point_mass.yaml's 3.75 m sensor in the full-observation matrix
+    short = {spec for role in limited for _, spec in limited[role] if spec.endswith(".zip")}
+    seeing_all = {spec for role in full for _, spec in full[role]}
     results = {}
     for observation in args.observation:
+        roster = {role: limited[role] + (full[role] if observation == "full" else []) for role in limited}
         table = {}
         for p_label, p_spec in roster["pursuer"]:
             for e_label, e_spec in roster["evader"]:
+                if {p_spec, e_spec} & short and {p_spec, e_spec} & seeing_all:
+                    continue  # a 3.75 m checkpoint against one trained seeing: neither game is the other's
                 if observation == "full":  # a learned player keeps the sensor it was trained with
-                    roles = tuple(role for role, spec in (("pursuer", p_spec), ("evader", e_spec))
-                                  if not spec.endswith(".zip"))
+                    roles = tuple(role for role, spec in (("pursuer", p_spec), ("evader", e_spec)) if spec not in short)
                     scenario = seeing(base, roles)
                 else:
                     scenario = base
-                pursuer = make_player(p_spec, "pursuer", scenario if not p_spec.endswith(".zip") else base, base, 1)
-                evader = make_player(e_spec, "evader", scenario if not e_spec.endswith(".zip") else base, base, 2)
+                pursuer = make_player(p_spec, "pursuer", base if p_spec in short else scenario, base, 1)
+                evader = make_player(e_spec, "evader", base if e_spec in short else scenario, base, 2)
                 table[f"{p_label} | {e_label}"] = rate(scenario, pursuer, evader, args.episodes)
             print(f"done: {observation} {p_label}", file=sys.stderr)
         results[observation] = table
@@ -368,28 +381,34 @@ def matrix(args: argparse.Namespace) -> None:
         print("| evader \\ pursuer | " + " | ".join(pursuers) + " |")
         print("| --- |" + " ---: |" * len(pursuers))
         for e_label, _ in roster["evader"]:
-            cells = [table[f"{p} | {e_label}"] for p in pursuers]
-            print(f"| {e_label} | " + " | ".join(f"{r:.3f} ({t:.2f})" for r, t in cells) + " |")
-        print_targets(table, roster)
+            cells = [table.get(f"{p} | {e_label}") for p in pursuers]
+            print(f"| {e_label} | " + " | ".join(f"{c[0]:.3f} ({c[1]:.2f})" if c else "—" for c in cells) + " |")
+        print_targets(table, roster, short if observation == "full" else set())
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
 
 
-def print_targets(table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]]) -> None:
+def print_targets(table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]],
+                  short: set[str]) -> None:
     """Issue 19's targets: the hj pursuer captures at least as often as the best heuristic pursuer against
-    every evader, and the hj evader is caught at most as often as the best heuristic evader by every pursuer."""
+    every evader, and the hj evader is caught at most as often as the best heuristic evader by every pursuer.
+    An opponent in ``short`` (a checkpoint keeping its 3.75 m sensor under full observation) plays another
+    game than the value's, and its row says so instead."""
     def heuristic(label: str) -> bool:
         return not label.startswith(("hj", "learned"))
 
+    def verdict(met: bool, spec: str) -> str:
+        return ("yes" if met else "no") + (" (its 3.75 m sensor: not the full-information game)" if spec in short else "")
+
     print("\n| opponent | hj | best heuristic | target met |\n| --- | ---: | --- | --- |")
-    for e_label, _ in roster["evader"]:
+    for e_label, e_spec in roster["evader"]:
         best = max((table[f"{p} | {e_label}"][0], p) for p, _ in roster["pursuer"] if heuristic(p))
         ours = table[f"hj | {e_label}"][0]
-        print(f"| evader {e_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {'yes' if ours >= best[0] else 'no'} |")
-    for p_label, _ in roster["pursuer"]:
+        print(f"| evader {e_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {verdict(ours >= best[0], e_spec)} |")
+    for p_label, p_spec in roster["pursuer"]:
         best = min((table[f"{p_label} | {e}"][0], e) for e, _ in roster["evader"] if heuristic(e))
         ours = table[f"{p_label} | hj"][0]
-        print(f"| pursuer {p_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {'yes' if ours <= best[0] else 'no'} |")
+        print(f"| pursuer {p_label} | {ours:.3f} | {best[0]:.3f} ({best[1]}) | {verdict(ours <= best[0], p_spec)} |")
 
 
 # ---------------------------------------------------------------------- Table II
@@ -451,6 +470,9 @@ def main() -> None:
     m = sub.add_parser("matrix", help="capture matrices under full and partial observation")
     m.add_argument("--pursuer", help="a learned pursuer checkpoint (.zip) to add")
     m.add_argument("--evader", help="a learned evader checkpoint (.zip) to add")
+    m.add_argument("--full-pursuer", help="a learned pursuer trained under full observation "
+                   "(benchmarks/point_mass_full.yaml), for the full-observation matrix")
+    m.add_argument("--full-evader", help="a learned evader trained under full observation, likewise")
     m.add_argument("--episodes", type=int, default=EPISODES)
     m.add_argument("--observation", nargs="+", choices=("full", "partial"), default=["full", "partial"])
     m.add_argument("--json", help="also write the matrices to this JSON file")

@@ -287,7 +287,7 @@ def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
     assert (out / "table.png").stat().st_size > 1000 and (out / "tournament" / "results.json").is_file()
     assert len(json.loads((out / "experiment.json").read_text())["sessions"]) == 2
     result = runner.invoke(app, ["experiment", "status", str(out)])
-    assert result.exit_code == 0 and "2/2 runs done" in result.output
+    assert result.exit_code == 0 and "2/2 runs done" in result.output and "tournament: done" in result.output
     other = experiment_from_dict({**SMOKE, "name": "smoke"}, "other")
     with pytest.raises(PecliError, match="holds experiment 'smoke' with other settings"):
         ExperimentRunner(other, out).prepare()
@@ -346,3 +346,15 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
         assert (out / "zoo" / name / SELFPLAY_STATE).read_bytes() == state
         assert (out / "zoo" / name / "command.txt").read_text().count("\n") == 1
     assert (out / "report.md").is_file()
+
+
+def test_status_counts_the_pairings_a_stopped_stage_has_played(tmp_path: Path) -> None:
+    from pecli.experiment.pipeline import stage_lines
+
+    state = {"stages": {"ranking": {"pairings": 5, "status": "done"},
+                        "tournament": {"pairings": 4, "status": "running"}}}
+    cache = tmp_path / "tournament" / "pairings"
+    cache.mkdir(parents=True)
+    for i in range(3):
+        (cache / f"{i}.json").write_text("{}")
+    assert stage_lines(tmp_path, state) == ["ranking: done, 5 pairings", "tournament: stopped, 3/4 pairings played"]

@@ -159,19 +159,16 @@ def run(
 @user_errors
 def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
     """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
-    from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, statuses
+    from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, stage_lines, statuses
 
     loaded = open_experiment(out)
     state = read_state(out)
     rows = statuses(loaded, out)
     alive = driver_alive(state)
     console.print(runs_table(rows, f"experiment {loaded.name} in {out}" + (" (running)" if alive else "")))
-    stages = state.get("stages", {})
-    for name in ("ranking", "tournament"):
-        stage = stages.get(name)
-        if isinstance(stage, dict):
-            console.print(f"{name}: {stage.get('status')}, {stage.get('pairings')} pairings", highlight=False)
-    if stages.get("report") == "done":
+    for line in stage_lines(out, state):
+        console.print(line, highlight=False)
+    if state.get("stages", {}).get("report") == "done":
         console.print(f"report: {out / 'report.md'}", highlight=False)
 
 

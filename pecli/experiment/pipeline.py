@@ -108,6 +108,25 @@ def driver_alive(state: dict[str, Any]) -> bool:
     return driver.get("ended") is None
 
 
+def stage_lines(out: Path, state: dict[str, Any]) -> list[str]:
+    """The ranking's and the tournament's progress, one line each, from ``state`` and the pairings cached
+    in ``out``: e.g. ``"ranking: running, 684/939 pairings played"``."""
+    alive = driver_alive(state)
+    lines = []
+    for name in ("ranking", "tournament"):
+        stage = state.get("stages", {}).get(name)
+        if not isinstance(stage, dict):
+            continue
+        total, status = stage.get("pairings", 0), stage.get("status")
+        if status == "done":
+            lines.append(f"{name}: done, {total} pairings")
+            continue
+        cache = out / name / "pairings"
+        played = min(total, len(list(cache.glob("*.json")))) if cache.is_dir() else 0
+        lines.append(f"{name}: {status if alive else 'stopped'}, {played}/{total} pairings played")
+    return lines
+
+
 def statuses(experiment: LoadedExperiment, out: Path) -> list[RunStatus]:
     """Every run's status from the files in ``out`` (what ``pecli experiment status`` shows)."""
     state = read_state(out)

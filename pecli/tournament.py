@@ -199,8 +199,8 @@ def _checkpoints_under(folder: Path) -> list[Path]:
 
 def check_saved_players(entry: str, scenario: Scenario) -> None:
     """For a checkpoint, an exported model or a folder of checkpoints: :class:`PecliError` unless it gives at
-    least one player of ``scenario``. Reads metadata only, and a folder up to its first good checkpoint;
-    other entries are not checked."""
+    least one player of ``scenario``. Loads no network: a folder's checkpoints are read for their metadata
+    up to the first good one, a single file as the tournament would list it; other entries are not checked."""
     path = Path(entry)
     if family_of(entry) is not None:
         return

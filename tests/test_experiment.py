@@ -357,4 +357,6 @@ def test_status_counts_the_pairings_a_stopped_stage_has_played(tmp_path: Path) -
     cache.mkdir(parents=True)
     for i in range(3):
         (cache / f"{i}.json").write_text("{}")
-    assert stage_lines(tmp_path, state) == ["ranking: done, 5 pairings", "tournament: stopped, 3/4 pairings played"]
+    assert stage_lines(tmp_path, state, alive=False) == ["ranking: done, 5 pairings",
+                                                         "tournament: stopped, 3/4 pairings played"]
+    assert stage_lines(tmp_path, state, alive=True)[1] == "tournament: running, 3/4 pairings played"

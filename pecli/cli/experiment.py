@@ -166,7 +166,7 @@ def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (it
     rows = statuses(loaded, out)
     alive = driver_alive(state)
     console.print(runs_table(rows, f"experiment {loaded.name} in {out}" + (" (running)" if alive else "")))
-    for line in stage_lines(out, state):
+    for line in stage_lines(out, state, alive):
         console.print(line, highlight=False)
     if state.get("stages", {}).get("report") == "done":
         console.print(f"report: {out / 'report.md'}", highlight=False)

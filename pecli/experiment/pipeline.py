@@ -108,10 +108,9 @@ def driver_alive(state: dict[str, Any]) -> bool:
     return driver.get("ended") is None
 
 
-def stage_lines(out: Path, state: dict[str, Any]) -> list[str]:
-    """The ranking's and the tournament's progress, one line each, from ``state`` and the pairings cached
-    in ``out``: e.g. ``"ranking: running, 684/939 pairings played"``."""
-    alive = driver_alive(state)
+def stage_lines(out: Path, state: dict[str, Any], alive: bool) -> list[str]:
+    """The ranking's and the tournament's progress, one line each, from ``state``, whether its driver is
+    ``alive``, and the pairings cached in ``out``: e.g. ``"ranking: running, 684/939 pairings played"``."""
     lines = []
     for name in ("ranking", "tournament"):
         stage = state.get("stages", {}).get(name)

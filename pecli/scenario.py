@@ -275,6 +275,8 @@ class Training(_Model):
     batch_size: Count = Field(default=512, ge=1, le=MAX_BATCH)
     gamma: Real = Field(default=0.99, gt=0, le=1)
     tau: Real = Field(default=0.005, gt=0, le=1)
+    n_step: Count = Field(default=1, ge=1, le=1000,
+                          description="n-step returns: rewards summed over n transitions before bootstrapping")
     action_noise: Real = Field(default=0.1, ge=0, description="std of the Gaussian exploration noise")
     net_arch: list[Annotated[Count, Field(ge=1, le=MAX_WIDTH)]] = Field(
         default=[128, 128], min_length=1, max_length=MAX_DEPTH, description="hidden layer widths of actor and critics"

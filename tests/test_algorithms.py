@@ -16,7 +16,9 @@ from pecli.cli import app
 from pecli.export import export_checkpoint
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
-from pecli.rl.algorithms import ALGORITHMS, ConcatDictReplayBuffer, TensorDict, deterministic_actor, get_algorithm, torch_device
+from pecli.rl.algorithms import ALGORITHMS, deterministic_actor, get_algorithm, torch_device
+from pecli.rl.buffers import ConcatDictReplayBuffer, TensorDict
+from stable_baselines3.common.buffers import DictReplayBuffer
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.runtime import ExportedModel
 from pecli.scenario import ALGOS, Scenario
@@ -98,7 +100,7 @@ def test_crossq_concatenates_dict_observations() -> None:
     both = th.cat([a, b], dim=0)
     assert isinstance(both, TensorDict) and both["obs"].shape == (6, 3) and both["state"].shape == (6, 1)
     assert th.equal(both["obs"][2:], th.ones(4, 3))
-    assert get_algorithm("crossq").cls is not None and ConcatDictReplayBuffer.__mro__[1].__name__ == "DictReplayBuffer"
+    assert get_algorithm("crossq").cls is not None and issubclass(ConcatDictReplayBuffer, DictReplayBuffer)
 
 
 def test_train_with_algo_then_play_on_the_cli(tmp_path: Path) -> None:
@@ -136,3 +138,11 @@ def test_torch_device_names() -> None:
 
     with pytest.raises(PecliError, match="unknown device"):
         torch_device("gpu")
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_actor_and_critic_use_fused_adam_and_crossq_keeps_its_betas(checkpoints, algo: str) -> None:
+    _, model, _ = checkpoints[algo]
+    for optimizer in (model.actor.optimizer, model.critic.optimizer):
+        assert optimizer.defaults["fused"] is True
+        assert optimizer.defaults["betas"] == ((0.5, 0.999) if algo == "crossq" else (0.9, 0.999))

@@ -23,12 +23,11 @@ import numpy as np
 import torch as th
 from sb3_contrib import TQC, CrossQ
 from stable_baselines3 import DDPG, SAC, TD3
-from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.noise import NormalActionNoise
-from stable_baselines3.common.type_aliases import DictReplayBufferSamples
 from torch import nn
 
 from pecli.errors import PecliError, PolicyError
+from pecli.rl.buffers import ConcatDictReplayBuffer, NStepDictReplayBuffer
 from pecli.rl.policies import (
     CentralCriticCrossQPolicy,
     CentralCriticPolicy,
@@ -87,13 +86,28 @@ def policy_kwargs(training: Training) -> dict[str, Any]:
     return kwargs
 
 
+def optimizer_kwargs(training: Training) -> dict[str, Any]:
+    """Adam's keyword arguments for actor and critics: the fused kernel (one call for all parameters, on
+    CPU as on CUDA: about 8 % less time per TD3 gradient step here than torch's default per-tensor loop),
+    and CrossQ's own betas (sb3-contrib sets them only when no optimiser arguments are given)."""
+    kwargs: dict[str, Any] = {"fused": True}
+    if training.algo == "crossq":
+        kwargs["betas"] = (0.5, 0.999)
+    return kwargs
+
+
 def algorithm_kwargs(training: Training) -> dict[str, Any]:
     """The algorithm's keyword arguments beyond those all of them share (learning rate, buffer, batch, ...)."""
+    buffer = {
+        "replay_buffer_class": ConcatDictReplayBuffer if training.algo == "crossq" else NStepDictReplayBuffer,
+        "replay_buffer_kwargs": {"n_step": training.n_step, "gamma": training.gamma},
+    }
     if training.algo == "crossq":  # no target networks, so no tau
-        return {"replay_buffer_class": ConcatDictReplayBuffer}
+        return buffer
     if get_algorithm(training.algo).stochastic:
-        return {"tau": training.tau}
-    return {"tau": training.tau, "action_noise": NormalActionNoise(np.zeros(2), training.action_noise * np.ones(2))}
+        return {**buffer, "tau": training.tau}
+    noise = NormalActionNoise(np.zeros(2), training.action_noise * np.ones(2))
+    return {**buffer, "tau": training.tau, "action_noise": noise}
 
 
 def deterministic_actor(actor: nn.Module) -> nn.Module:
@@ -125,28 +139,3 @@ def torch_device(name: str) -> th.device:
     elif device.type != "cpu":
         raise PecliError(f"unsupported device '{name}' (use cpu, cuda or auto)")
     return device
-
-
-class TensorDict(dict):
-    """A ``dict`` of tensors that ``torch.cat`` concatenates key by key.
-
-    CrossQ passes observations and next observations through its critics in one batch,
-    ``th.cat([obs, next_obs])``, which torch cannot do for ``Dict`` observations; this type answers
-    ``torch.cat`` through torch's ``__torch_function__`` protocol.
-    """
-
-    @classmethod
-    def __torch_function__(cls, func: Any, types: Any, args: tuple = (), kwargs: dict | None = None) -> Any:
-        if func is not th.cat:
-            return NotImplemented
-        parts, *rest = args
-        return cls({key: th.cat([part[key] for part in parts], *rest, **(kwargs or {})) for key in parts[0]})
-
-
-class ConcatDictReplayBuffer(DictReplayBuffer):
-    """SB3's ``DictReplayBuffer`` whose samples' observations are :class:`TensorDict` (for CrossQ)."""
-
-    def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> DictReplayBufferSamples:
-        samples = super()._get_samples(batch_inds, env)
-        return samples._replace(observations=TensorDict(samples.observations),
-                                next_observations=TensorDict(samples.next_observations))

@@ -28,7 +28,7 @@ from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.durable import DurableState
 from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay, every_episodes
 from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, policy_kwargs, torch_device
+from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, optimizer_kwargs, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name
@@ -167,7 +167,7 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
     """A fresh SB3 model with the paper's hyperparameters from the scenario's training section."""
     t = job.scenario.training
     algorithm = get_algorithm(t.algo)
-    kwargs: dict[str, Any] = policy_kwargs(t)
+    kwargs: dict[str, Any] = {**policy_kwargs(t), "optimizer_kwargs": optimizer_kwargs(t)}
     if t.belief != "none":
         kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
     return algorithm.cls(

@@ -1,6 +1,7 @@
 """Training speed and learning quality of ``pecli train``.
 
     python benchmarks/bench_train.py speed                  # env-steps/s: pecli train vs plain SB3, one run
+    python benchmarks/bench_train.py optimizer              # CPU time per gradient step with each kind of Adam
     python benchmarks/bench_train.py curves --minutes 10    # capture rate vs greedy over CPU time, 3 seeds
     python benchmarks/bench_train.py report                 # table + plot from finished curve runs
 
@@ -103,6 +104,42 @@ def speed(args: argparse.Namespace) -> None:
     for name, rates in results.items():
         rate = statistics.median(rates)
         print(f"| {name} | {rate:,.0f} | {rate / reference:.2f}x |")
+
+
+def optimizer(args: argparse.Namespace) -> None:
+    """CPU time of one gradient step of pecli's learner with each of Adam's implementations."""
+    import torch as th
+
+    from pecli.policies import resolve_policy
+    from pecli.rl.train import TrainJob, make_model
+    from pecli.scenario import load_scenario
+    from wrappers.frozen_opponent import FrozenOpponentVecEnv
+
+    th.set_num_threads(1)
+    scenario = load_scenario(args.config)
+    t = scenario.training
+    env = FrozenOpponentVecEnv(scenario, "pursuer", resolve_policy("greedy", "evader", scenario), n=t.n_envs)
+    job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench")
+    model = make_model(job, env, tensorboard=None)
+    model.learning_starts = 2000
+    model.learn(2000 + 16 * t.n_envs)  # a filled buffer, every network built
+    variants = {"for-loop (torch's CPU default)": {"foreach": False}, "foreach": {"foreach": True}, "fused": {"fused": True}}
+    results: dict[str, list[float]] = {name: [] for name in variants}
+    for _ in range(args.repeats):
+        for name, kwargs in variants.items():
+            for net in (model.actor, model.critic):
+                net.optimizer = th.optim.Adam(net.parameters(), lr=t.learning_rate, **kwargs)
+            start = time.process_time()
+            model.train(gradient_steps=args.steps, batch_size=t.batch_size)
+            results[name].append((time.process_time() - start) / args.steps)
+    reference = statistics.median(results["for-loop (torch's CPU default)"])
+    print(f"{scenario.name}: {t.algo}, batch {t.batch_size}, net {list(t.net_arch)}, {args.steps} gradient steps, "
+          f"1 torch thread, median of {args.repeats}")
+    print("| Adam | ms per gradient step | ratio |")
+    print("| --- | ---: | ---: |")
+    for name, times in results.items():
+        step = statistics.median(times)
+        print(f"| {name} | {1000 * step:.2f} | {step / reference:.2f}x |")
 
 
 def curves(args: argparse.Namespace) -> None:
@@ -252,6 +289,10 @@ def main() -> None:
     s.add_argument("--config", default="paper")
     s.add_argument("--steps", type=int, default=6000)
     s.add_argument("--repeats", type=int, default=3)
+    o = sub.add_parser("optimizer")
+    o.add_argument("--config", default="tuned")
+    o.add_argument("--steps", type=int, default=1000)
+    o.add_argument("--repeats", type=int, default=5)
     c = sub.add_parser("curves")
     c.add_argument("--config", default="paper")
     c.add_argument("--belief", default="none")
@@ -277,7 +318,7 @@ def main() -> None:
     p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
     p.add_argument("--episodes", type=int, default=500)
     args = parser.parse_args()
-    {"speed": speed, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
+    {"speed": speed, "optimizer": optimizer, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
 
 
 if __name__ == "__main__":

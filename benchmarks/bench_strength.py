@@ -1,7 +1,7 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
     python benchmarks/bench_strength.py train --schedules alternating simultaneous league --beliefs none bimdn \\
-        --seeds 0 1 2 --cpu-hours 4 [--config paper] [--steps-per-round 40000] [--zoo runs/bench_strength]
+        --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500]
 
 ``train`` runs ``pecli selfplay`` for every (schedule, belief, seed), one round at a time (``--resume
@@ -162,7 +162,7 @@ def main() -> None:
     sub = parser.add_subparsers(dest="what", required=True)
     for name in ("train", "report"):
         command = sub.add_parser(name)
-        command.add_argument("--config", default="paper")
+        command.add_argument("--config", default="tuned")  # the strength experiment's settings
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
     sub.choices["train"].add_argument("--schedules", nargs="+", default=["alternating", "simultaneous", "league"],
                                       choices=["alternating", "simultaneous", "league"])

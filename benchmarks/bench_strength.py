@@ -1,13 +1,15 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
     python benchmarks/bench_strength.py train --schedules alternating simultaneous league --beliefs none bimdn \\
-        --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--steps-per-round 40000] [--zoo runs/bench_strength]
+        --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500]
 
-``train`` runs ``pecli selfplay`` for every (schedule, belief, seed), one round at a time (``--resume
---rounds k``), until the run's recorded CPU time (the sum of its turns') reaches ``--cpu-hours``: so
-every schedule gets the same CPU, whatever a round costs it. Stopping it at any moment is safe; run
-it again to continue (each run resumes from its own durable state).
+``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml) that the
+schedules, beliefs and seeds name, one at a time in this process, with the experiment's own code
+(:func:`pecli.experiment.runs.execute_run`): each stops after the first round at which its recorded CPU
+time (the sum of its turns') reaches ``--cpu-hours``, so every schedule gets the same CPU, whatever a
+round costs it, and ``--rounds`` is a ceiling over which the curriculum is scheduled. Stopping it at any
+moment is safe; run it again to continue (each run resumes from its own durable state).
 
 The same runs as one Ray experiment (2 at a time here, as many as a cluster has cores), each to the same
 CPU budget, then the same report::
@@ -35,17 +37,16 @@ import yaml
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from pecli.scenario import load_scenario  # noqa: E402
+from pecli.experiment.runs import execute_run  # noqa: E402
+from pecli.experiment.spec import RunSpec, builtin_experiment_dir, experiment_from_dict  # noqa: E402
+from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
+from pecli.scenario import load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner")
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
-
-
-def run_name(schedule: str, belief: str, seed: int) -> str:
-    return f"{schedule}-{belief}-s{seed}"
 
 
 def run_cpu_hours(run: Path) -> float:
@@ -56,27 +57,29 @@ def run_cpu_hours(run: Path) -> float:
     return sum(t["cpu_seconds"] for t in json.loads(path.read_text())["turns"]) / 3600
 
 
-def rounds_done(run: Path) -> int:
-    path = run / "selfplay.json"
-    return max((t["round"] for t in json.loads(path.read_text())["turns"]), default=0) if path.is_file() else 0
+def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
+    """The ``strength`` experiment's runs for the schedules, beliefs and seeds asked for, at ``--cpu-hours``."""
+    path = builtin_experiment_dir() / "strength.yaml"
+    data = read_yaml(path)
+    data["scenario"] = args.config
+    data["runs"].update(kinds=args.beliefs, seeds=args.seeds, schedules=args.schedules, cpu_hours=args.cpu_hours)
+    if args.rounds is not None:
+        data["runs"]["rounds"] = args.rounds
+    if args.steps_per_round is not None:
+        data["runs"]["steps_per_round"] = args.steps_per_round
+    return experiment_from_dict(data, str(path), base=path.parent).runs()
 
 
 def train(args: argparse.Namespace) -> None:
-    for seed in args.seeds:
-        for belief in args.beliefs:
-            for schedule in args.schedules:
-                run = args.zoo / run_name(schedule, belief, seed)
-                while run_cpu_hours(run) < args.cpu_hours:
-                    rounds = rounds_done(run) + 1
-                    if (run / "selfplay.json").is_file():
-                        command = ["selfplay", "--resume", "--name", run.name, "--zoo", str(args.zoo), "--rounds", str(rounds)]
-                    else:
-                        command = ["selfplay", "-c", args.config, "--name", run.name, "--zoo", str(args.zoo), "--rounds", "1",
-                                   "--steps-per-round", str(args.steps_per_round), "--seed", str(seed), "--belief", belief]
-                        command += ["--schedule", "alternating", "--opponents", "league"] if schedule == "league" else \
-                            ["--schedule", schedule]
-                    print(f"$ pecli {' '.join(command)}   # {run_cpu_hours(run):.2f} of {args.cpu_hours} CPU-h", flush=True)
-                    subprocess.run([sys.executable, "-m", "pecli", *command, "--quiet"], check=True)
+    args.zoo.mkdir(parents=True, exist_ok=True)
+    for run in strength_runs(args):
+        print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
+        try:
+            outcome = execute_run(run, args.zoo, progress=True)
+        except SelfPlayInterrupted as stop:
+            sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
+        print(f"{run.name}: {outcome['did']}, {outcome['progress']['rounds']} rounds, "
+              f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
 
 def final_players(zoo: Path, scenario_name: str) -> dict[str, dict[str, Path]]:
@@ -169,7 +172,11 @@ def main() -> None:
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=["none", "bimdn"])
     sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     sub.choices["train"].add_argument("--cpu-hours", type=float, default=4.0)
-    sub.choices["train"].add_argument("--steps-per-round", type=int, default=40_000)
+    sub.choices["train"].add_argument("--steps-per-round", type=int, default=None,
+                                      help="transitions per side per round (default: the experiment's)")
+    sub.choices["train"].add_argument("--rounds", type=int, default=None,
+                                      help="the ceiling of rounds, over which the curriculum is scheduled "
+                                      "(default: the experiment's)")
     sub.choices["report"].add_argument("--episodes", type=int, default=500)
     sub.choices["report"].add_argument("--workers", type=int, default=2)
     args = parser.parse_args()

@@ -98,10 +98,10 @@ def cpu_through(turns: list[dict[str, Any]], round: int) -> float:
     return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
 
 
-def execute_run(run: RunSpec, zoo: Path) -> dict[str, Any]:
+def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, Any]:
     """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
     or do nothing if it is finished. Returns what it did (``started``, ``resumed`` or ``finished``), with
-    the CPU seconds of this call and the run's progress."""
+    the CPU seconds of this call and the run's progress. ``progress`` shows the trainers' own progress."""
     import torch
 
     from pecli.rl.selfplay import SelfPlay, SelfPlayJob
@@ -119,11 +119,11 @@ def execute_run(run: RunSpec, zoo: Path) -> dict[str, Any]:
             # stopped between creating the run folder and writing its first state: nothing was trained
             shutil.rmtree(folder)
         SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
-                             progress=False)).run(after_round=lambda _: not run_progress(run, zoo).done)
+                             progress=progress)).run(after_round=lambda _: not run_progress(run, zoo).done)
     else:
         resume = (folder / "config.yaml").is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]
         train(TrainJob(role=run.schedule, scenario=run.scenario, opponent=opponent, zoo=zoo, name=run.name,
-                       seed=run.seed, resume=resume, progress=False))
+                       seed=run.seed, resume=resume, progress=progress))
     return {"did": "resumed" if resume else "started", "cpu_seconds": round(time.process_time() - cpu, 2),
             "progress": run_progress(run, zoo).to_dict()}

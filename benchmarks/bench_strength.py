@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
+import re
 import sys
 from pathlib import Path
 
@@ -37,6 +37,7 @@ import yaml
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.experiment.spec import RunSpec, builtin_experiment_dir, experiment_from_dict  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
@@ -46,6 +47,7 @@ from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner")
+RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league)-s\d+")  # <belief>-<schedule>-s<seed>
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
 
 
@@ -73,6 +75,12 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
 def train(args: argparse.Namespace) -> None:
     args.zoo.mkdir(parents=True, exist_ok=True)
     for run in strength_runs(args):
+        recorded = args.zoo / run.name / "config.yaml"
+        if recorded.is_file():  # a resumed run keeps its settings: --config, --rounds and --steps-per-round included
+            changed = changes(read_yaml(recorded), run.scenario.model_dump(mode="json"))
+            if changed:
+                sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, "
+                         "or another --zoo")
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
         try:
             outcome = execute_run(run, args.zoo, progress=True)
@@ -86,6 +94,8 @@ def final_players(zoo: Path, scenario_name: str) -> dict[str, dict[str, Path]]:
     """Each run's newest main checkpoint per role: ``{run: {role: path}}``."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
+        if not RUN_NAME.fullmatch(state.parent.name):  # not a run of the strength experiment
+            continue
         turns = [t for t in json.loads(state.read_text())["turns"] if t.get("learner", "main") == "main"]
         latest = {t["role"]: state.parent / t["checkpoint"] for t in turns}
         if len(latest) == 2:

@@ -249,13 +249,17 @@ def selfplay(args: argparse.Namespace) -> None:
             command += ["--resume"] if (run / "selfplay.json").exists() else ["-c", config, "--seed", str(seed)]
             print("started:", " ".join(command[1:]), flush=True)
             process = subprocess.Popen(command, cwd=ROOT)
+            capped = False
             while process.poll() is None:
                 time.sleep(5)
                 if process.poll() is None and before + _process_cpu_seconds(process.pid) >= 60 * args.minutes:
                     process.send_signal(signal.SIGTERM)  # keeps the finished turns
                     process.wait()
-            if process.returncode == 0:
-                (run / "done").touch()  # played all its rounds within the cap
+                    capped = True
+            if process.returncode == 0 or capped:
+                # played all its rounds, or reached the cap (its finished turns may sum to a little less:
+                # a later call must not resume it, or it would train past the cap bit by bit)
+                (run / "done").touch()
             used = sum(t["cpu_seconds"] for t in _turns(run))
             print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
     print(f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "

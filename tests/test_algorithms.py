@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.buffers import DictReplayBuffer
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -18,7 +19,6 @@ from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
 from pecli.rl.algorithms import ALGORITHMS, deterministic_actor, get_algorithm, torch_device
 from pecli.rl.buffers import ConcatDictReplayBuffer, TensorDict
-from stable_baselines3.common.buffers import DictReplayBuffer
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.runtime import ExportedModel
 from pecli.scenario import ALGOS, Scenario

@@ -1,4 +1,4 @@
-"""n-step returns for Dict observations: sums, discounts, episode ends, the ring's newest row, training."""
+"""n-step returns for Dict observations: sums, discounts, episode ends, the ring's newest row, abandoned games, training."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 
 from pecli.policies import resolve_policy
-from pecli.rl.buffers import NStepDictReplayBuffer
+from pecli.rl.buffers import NStepDictReplayBuffer, end_episodes
+from pecli.rl.durable import Ring, _read_chunks, _write_chunk, replay_arrays
 from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
 from pecli.scenario import Scenario
 
@@ -74,6 +75,33 @@ def test_one_step_samples_exactly_as_sb3s_dict_buffer() -> None:
     b = sb3._get_samples(rows)
     for x, y in ((a.rewards, b.rewards), (a.dones, b.dones), (a.next_observations["obs"], b.next_observations["obs"])):
         assert np.array_equal(x.numpy(), y.numpy())
+
+
+def test_abandoned_games_end_returns_and_one_step_samples_do_not_change() -> None:
+    buffer = filled(3, rows=5)
+    end_episodes(buffer)  # a new turn: the games of row 4 are gone
+    buffer.add({"obs": np.array([[9.0]], np.float32)}, {"obs": np.array([[9.5]], np.float32)},
+               np.zeros((1, 2), np.float32), np.array([10.0]), np.array([False]), [{}])
+    s = sample(buffer, 3)
+    assert s.rewards.item() == pytest.approx(4 + GAMMA * 5) and s.discounts.item() == pytest.approx(GAMMA**2)
+    assert s.next_observations["obs"].item() == pytest.approx(4.5) and s.dones.item() == 0  # bootstraps
+    one_step, sb3 = filled(1, rows=5, done={2}), filled(1, rows=5, done={2}, buffer_class=DictReplayBuffer)
+    end_episodes(one_step)
+    a, b = one_step._get_samples(np.arange(5)), sb3._get_samples(np.arange(5))
+    assert np.array_equal(a.dones.numpy(), b.dones.numpy()) and np.array_equal(a.rewards.numpy(), b.rewards.numpy())
+
+
+def test_a_row_marked_after_a_save_is_saved_again_with_the_next_rows(tmp_path) -> None:
+    buffer = filled(3, rows=4)
+    ring = _write_chunk(tmp_path, "replay", replay_arrays(buffer), Ring(buffer.buffer_size), 4)
+    end_episodes(buffer)  # row 3, already on disk unmarked
+    buffer.add({"obs": np.array([[4.0]], np.float32)}, {"obs": np.array([[4.5]], np.float32)},
+               np.zeros((1, 2), np.float32), np.array([5.0]), np.array([False]), [{}])
+    ring = _write_chunk(tmp_path, "replay", replay_arrays(buffer), ring, 5)
+    restored = filled(3, rows=0)
+    _read_chunks(tmp_path, ring, replay_arrays(restored))
+    assert restored.dones[3, 0] == 1 and restored.timeouts[3, 0] == 1 and restored.dones[4, 0] == 0
+    assert np.array_equal(restored.rewards[:5, 0], [1, 2, 3, 4, 5])
 
 
 @pytest.mark.parametrize("algo", ["td3", "crossq"])

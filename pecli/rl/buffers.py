@@ -12,8 +12,23 @@ from typing import Any
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.buffers import DictReplayBuffer
+from stable_baselines3.common.buffers import DictReplayBuffer, ReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
+
+
+def end_episodes(buffer: ReplayBuffer) -> None:
+    """Mark the newest row of every env as the end of its episode, a truncation where it was not one already.
+
+    Call it where a learner abandons its games in flight (a self-play turn that starts new games, a
+    resumed run): otherwise an n-step return that starts just before would run on into the next,
+    unrelated game. A truncation bootstraps from the row's own next observation, so one-step samples
+    do not change.
+    """
+    if buffer.pos == 0 and not buffer.full:
+        return
+    row = (buffer.pos - 1) % buffer.buffer_size
+    buffer.timeouts[row] = np.where(buffer.dones[row] > 0, buffer.timeouts[row], 1.0)
+    buffer.dones[row] = 1.0
 
 
 class NStepDictReplayBuffer(DictReplayBuffer):

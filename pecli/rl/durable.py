@@ -12,7 +12,7 @@ loses at most one checkpoint interval::
         belief-optimizer-000120000.pt    the belief's optimiser state (tensors: torch.load(weights_only=True))
 
 A buffer is written incrementally: each save adds one file with the rows added since the previous
-save, and a file leaves once every row of it has been overwritten in the ring. So a save costs what
+save (and the previous one's last row again, which may have been marked as an episode end since), and a file leaves once every row of it has been overwritten in the ring. So a save costs what
 the interval added, not the whole buffer. Each save writes its new files, then replaces ``state.json``
 (the commit), then deletes what ``state.json`` no longer names: a file is either named by the
 committed record and complete, or garbage left by a stop, removed by the next save or load.
@@ -32,6 +32,7 @@ import numpy as np
 import torch as th
 
 from pecli.io import atomic_path, atomic_write_json
+from pecli.rl.buffers import end_episodes
 from pecli.trust import untrusted
 from pecli.zoo import ZooError
 
@@ -111,11 +112,14 @@ def replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
 
 
 def _write_chunk(directory: Path, prefix: str, arrays: dict[str, np.ndarray], ring: Ring, added: int) -> Ring:
-    """``ring`` after writing the rows ``[ring.added, added)`` (at most the last ``capacity``) to a new file."""
-    start = max(ring.added, added - ring.capacity)
+    """``ring`` after writing the rows ``[ring.added - 1, added)`` (at most the last ``capacity``) to a new file.
+
+    The previous file's last row is written again: a learner that abandons its games marks it as an
+    episode end after that file was written (:func:`pecli.rl.buffers.end_episodes`)."""
     kept = [c for c in ring.chunks if c.end > added - ring.capacity]  # files with a row not yet overwritten
-    if added <= start:
+    if added <= ring.added:
         return Ring(ring.capacity, added, kept)
+    start = max(ring.added - 1, 0, added - ring.capacity)
     name = f"{prefix}-{start:08d}-{added:08d}.npz"
     rows = np.arange(start, added) % ring.capacity
     with atomic_path(directory / name) as tmp:
@@ -193,6 +197,7 @@ class DurableState:
                 _read_chunks(self.directory, record.replay, replay_arrays(buffer))
                 buffer.pos = record.replay.added % buffer.buffer_size
                 buffer.full = record.replay.added >= buffer.buffer_size
+                end_episodes(buffer)  # the games of the newest rows are lost: returns stop there
             if fit is not None and record.belief is not None:
                 pairs = fit.buffer
                 if record.belief.capacity != pairs.capacity:

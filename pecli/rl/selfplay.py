@@ -43,6 +43,7 @@ from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.belief import BeliefVecEnv, FitBelief
+from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
     EpisodeStats,
@@ -336,6 +337,7 @@ class SelfPlay:
                  for role in ROLES}
         for role in ROLES:
             model = learners[role].model
+            end_episodes(model.replay_buffer)  # the games in flight end here
             model.set_env(learners[role].env, force_reset=True)
             model.set_random_seed(seed)
         games.next_seed = seed
@@ -425,6 +427,7 @@ class SelfPlay:
         learner.env.env_method("set_opponent", mixed)
         if learner.curriculum is not None:  # the games SB3 starts before any callback runs count too
             learner.curriculum.apply_to(learner.env, model.num_timesteps)
+        end_episodes(model.replay_buffer)  # the games in flight end here: returns must not run into the new ones
         model.set_env(learner.env, force_reset=True)  # every game starts afresh against the new pool
         model.set_random_seed(seed)
 

@@ -193,33 +193,36 @@ def report(args: argparse.Namespace) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = sorted(CURVES.glob(f"{args.label or args.config}-{args.belief}-s*/eval_pursuer.csv"))
-    if not runs:
-        sys.exit(f"no curve runs in {CURVES}: run the 'curves' step first")
+    main = args.label or args.config
+    groups = {name: sorted(CURVES.glob(f"{name}-{args.belief}-s*/eval_pursuer.csv")) for name in (main, *args.compare)}
+    for name, runs in groups.items():
+        if not runs:
+            sys.exit(f"no curve runs {name}-{args.belief}-s* in {CURVES}: run the 'curves' step first")
     fig, ax = plt.subplots(figsize=(6, 4))
-    at: dict[float, list[float]] = {float(m): [] for m in args.at}
-    for path in runs:
-        cpu, rate = _read(path)
-        ax.plot(cpu, rate, marker=".", label=path.parent.name)
-        finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
-        for minutes in at:
-            if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
-                at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
+    for colour, (name, runs) in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"], groups.items()):
+        at: dict[float, list[float]] = {float(m): [] for m in args.at}
+        for i, path in enumerate(runs):
+            cpu, rate = _read(path)
+            ax.plot(cpu, rate, marker=".", color=colour, alpha=1.0 - 0.25 * i, label=path.parent.name)
+            finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
+            for minutes in at:
+                if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
+                    at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
+        for minutes, values in at.items():
+            shown = ", ".join(f"{v:.2f}" for v in values) or "no run got that far"
+            median = f"{statistics.median(values):.2f}" if values else "-"
+            print(f"{name}: best capture rate within {minutes:g} CPU-min: median {median} ({shown})")
     ax.axhline(0.95, color="0.6", ls="--", lw=0.8)
     ax.set_xlabel("CPU minutes (one torch thread)")
     ax.set_ylabel("capture rate vs greedy (200 episodes)")
     ax.set_ylim(0, 1)
-    ax.set_title(f"pecli train pursuer, {args.label or args.config}, belief {args.belief}")
+    ax.set_title(f"pecli train pursuer, {' vs '.join(groups)}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper"
-                                       else f"learning_curves_{args.label or args.config}_{args.belief}.png")
+    out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper" and not args.label
+                                       else f"learning_curves_{main}_{args.belief}.png")
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
-    for minutes, values in at.items():
-        shown = ", ".join(f"{v:.2f}" for v in values) or "no run got that far"
-        median = f"{statistics.median(values):.2f}" if values else "-"
-        print(f"best capture rate within {minutes:g} CPU-min: median {median} ({shown})")
 
 
 SELFPLAY = Path(os.environ.get("PECLI_BENCH_SELFPLAY", ROOT / "runs" / "bench_train_selfplay"))
@@ -316,6 +319,8 @@ def main() -> None:
     r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
     r.add_argument("--out", type=Path, default=None, help="the plot (default: docs/learning_curves_...png)")
     r.add_argument("--label", help="the --label the curves were run with")
+    r.add_argument("--compare", nargs="+", default=[], metavar="LABEL",
+                   help="other curves to draw on the same plot, each in its colour (their --label or --config)")
     p = sub.add_parser("selfplay")
     p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])

@@ -12,8 +12,9 @@ loses at most one checkpoint interval::
         belief-optimizer-000120000.pt    the belief's optimiser state (tensors: torch.load(weights_only=True))
 
 A buffer is written incrementally: each save adds one file with the rows added since the previous
-save (and the previous one's last row again, which may have been marked as an episode end since), and a file leaves once every row of it has been overwritten in the ring. So a save costs what
-the interval added, not the whole buffer. Each save writes its new files, then replaces ``state.json``
+save (and the previous save's last row again, which may have been marked as an episode end since),
+and a file leaves once every row of it has been overwritten in the ring. So a save costs what the
+interval added, not the whole buffer. Each save writes its new files, then replaces ``state.json``
 (the commit), then deletes what ``state.json`` no longer names: a file is either named by the
 committed record and complete, or garbage left by a stop, removed by the next save or load.
 

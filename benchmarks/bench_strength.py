@@ -1,6 +1,6 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
-    python benchmarks/bench_strength.py train --schedules alternating simultaneous league --beliefs none bimdn \\
+    python benchmarks/bench_strength.py train --schedules league alternating simultaneous --beliefs none bimdn \\
         --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500]
 
@@ -74,13 +74,13 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
 
 def train(args: argparse.Namespace) -> None:
     args.zoo.mkdir(parents=True, exist_ok=True)
-    for run in strength_runs(args):
+    runs = strength_runs(args)
+    for run in runs:  # every run first: a resumed run keeps its settings (--config, --rounds, --steps-per-round)
         recorded = args.zoo / run.name / "config.yaml"
-        if recorded.is_file():  # a resumed run keeps its settings: --config, --rounds and --steps-per-round included
-            changed = changes(read_yaml(recorded), run.scenario.model_dump(mode="json"))
-            if changed:
-                sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, "
-                         "or another --zoo")
+        changed = changes(read_yaml(recorded), run.scenario.model_dump(mode="json")) if recorded.is_file() else []
+        if changed:
+            sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, or another --zoo")
+    for run in runs:
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
         try:
             outcome = execute_run(run, args.zoo, progress=True)
@@ -177,7 +177,7 @@ def main() -> None:
         command = sub.add_parser(name)
         command.add_argument("--config", default="tuned")  # the strength experiment's settings
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
-    sub.choices["train"].add_argument("--schedules", nargs="+", default=["alternating", "simultaneous", "league"],
+    sub.choices["train"].add_argument("--schedules", nargs="+", default=["league", "alternating", "simultaneous"],
                                       choices=["alternating", "simultaneous", "league"])
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=["none", "bimdn"])
     sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])

@@ -203,7 +203,7 @@ def report(args: argparse.Namespace) -> None:
         at: dict[float, list[float]] = {float(m): [] for m in args.at}
         for i, path in enumerate(runs):
             cpu, rate = _read(path)
-            ax.plot(cpu, rate, marker=".", color=colour, alpha=1.0 - 0.25 * i, label=path.parent.name)
+            ax.plot(cpu, rate, marker=".", color=colour, alpha=max(0.3, 1.0 - 0.25 * i), label=path.parent.name)
             finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
             for minutes in at:
                 if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
@@ -220,7 +220,7 @@ def report(args: argparse.Namespace) -> None:
     ax.legend(fontsize=7)
     fig.tight_layout()
     out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper" and not args.label
-                                       else f"learning_curves_{main}_{args.belief}.png")
+                                       else f"learning_curves_{'_vs_'.join(groups)}_{args.belief}.png")
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
 
@@ -239,6 +239,18 @@ def _turns(run: Path) -> list[dict]:
     return json.loads(state.read_text())["turns"] if state.is_file() else []
 
 
+def _done(run: Path, minutes: float) -> bool:
+    """Whether ``run`` played all its rounds, or was stopped at a cap of ``minutes`` or more (its ``done`` file)."""
+    marker = run / "done"
+    if not marker.is_file():
+        return False
+    text = marker.read_text().strip()
+    try:
+        return float(text) >= minutes
+    except ValueError:  # "all rounds" (or an empty marker of an older benchmark)
+        return True
+
+
 def selfplay(args: argparse.Namespace) -> None:
     """Self-play per config and seed to a CPU cap, then the configs' final players against each other."""
     SELFPLAY.mkdir(parents=True, exist_ok=True)
@@ -246,7 +258,7 @@ def selfplay(args: argparse.Namespace) -> None:
         for config in args.configs:
             run = SELFPLAY / f"{Path(config).stem}-s{seed}"
             before = sum(t["cpu_seconds"] for t in _turns(run))  # earlier processes' finished turns
-            if before >= 60 * args.minutes or (run / "done").exists():
+            if before >= 60 * args.minutes or _done(run, args.minutes):
                 continue
             command = [sys.executable, "-m", "pecli", "selfplay", "--zoo", str(SELFPLAY), "--name", run.name, "-q"]
             command += ["--resume"] if (run / "selfplay.json").exists() else ["-c", config, "--seed", str(seed)]
@@ -261,8 +273,8 @@ def selfplay(args: argparse.Namespace) -> None:
                     capped = True
             if process.returncode == 0 or capped:
                 # played all its rounds, or reached the cap (its finished turns may sum to a little less:
-                # a later call must not resume it, or it would train past the cap bit by bit)
-                (run / "done").touch()
+                # a later call with the same cap must not resume it, or it would train past it bit by bit)
+                (run / "done").write_text("all rounds\n" if process.returncode == 0 else f"{args.minutes}\n")
             used = sum(t["cpu_seconds"] for t in _turns(run))
             print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
     print(f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "

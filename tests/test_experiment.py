@@ -203,6 +203,14 @@ def test_self_play_schedules_and_a_cpu_budget_in_the_grid(tmp_path: Path) -> Non
             experiment_from_dict({**SMOKE, "runs": {**grid, "cpu_hours": bad}}, "exp.yaml")
 
 
+def test_runs_start_schedule_by_schedule_with_every_kind_of_a_seed_together() -> None:
+    """A cluster smaller than the grid finishes the first schedule for every kind, seed by seed, first."""
+    grid = {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1], "schedules": ["league", "alternating"]}
+    names = [run.name for run in experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()]
+    assert names == ["none-league-s0", "bimdn-league-s0", "none-league-s1", "bimdn-league-s1",
+                     "none-alternating-s0", "bimdn-alternating-s0", "none-alternating-s1", "bimdn-alternating-s1"]
+
+
 @pytest.mark.parametrize("schedule", ["selfplay", "league"])
 def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path, schedule: str) -> None:
     """A run whose budget is spent in round 1 stops there, well below its ceiling of 3 rounds, and a second

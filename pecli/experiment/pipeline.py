@@ -247,8 +247,9 @@ class ExperimentRunner:
 
     def _train(self, cluster: RayCluster) -> None:
         pending: dict[Any, RunStatus] = {}
-        # seed by seed: a partly run grid has every kind of the first seeds rather than all seeds of a few kinds
-        for row in sorted(self.rows, key=lambda row: row.run.seed):
+        # in the grid's order (schedule, seed, kind): a partly run grid has every kind of the first seeds of the
+        # first schedule rather than all seeds of a few kinds
+        for row in self.rows:
             if row.progress.done:
                 row.status = "done"
                 self.session.runs_skipped += 1

@@ -187,13 +187,15 @@ class LoadedExperiment:
         return self.spec.name
 
     def runs(self) -> list[RunSpec]:
-        """The grid in order: kind, then seed, then schedule."""
+        """The grid in the order the runs start: schedule, then seed, then kind. A cluster smaller than the grid
+        thus finishes the first schedule's runs of every kind, seed by seed, before it starts the next schedule:
+        an experiment stopped half-way can already compare the kinds."""
         from pecli.rl.train import with_overrides
 
         grid, out = self.spec.runs, []
-        for kind in grid.kinds:
+        for schedule in grid.schedules:
             for seed in grid.seeds:
-                for schedule in grid.schedules:
+                for kind in grid.kinds:
                     settings: dict[str, object] = {"belief": kind}
                     if schedule in SELFPLAY_SCHEDULES:
                         settings.update(SELFPLAY_SETTINGS[schedule])

@@ -5,6 +5,7 @@
     python benchmarks/bench_hj.py matrix --pursuer P.zip --evader E.zip    # full and partial observation
         [--full-pursuer P.zip --full-evader E.zip]                        # players of the full-information game
     python benchmarks/bench_hj.py table2 --pursuer P.zip --evader E.zip    # Table II by the documented commands
+    python benchmarks/bench_hj.py ratings [--full-pursuer P.zip ...]        # how the hj evader rates its inputs
     python benchmarks/bench_hj.py solve --quick    # small grids and horizons, a smoke run
 
 ``solve``: every solve runs in a fresh process on one thread (OMP_NUM_THREADS=1, XLA on one
@@ -32,6 +33,11 @@ with, since a checkpoint only plays the game it learned, while its opponent sees
 ``--full-pursuer``/``--full-evader`` add players trained on ``point_mass_full.yaml``, which see
 everywhere too) and under ``point_mass.yaml`` (3.75 m). ``table2`` runs the command sequence of docs/hj.md
 (``pecli hj solve``, ``pecli tournament``, ``pecli hj table``) and prints the table beside the paper's.
+
+``ratings``: under full observation, 500 games per cell (seed 0), the ``hj`` evader with each way of
+rating an input over the pursuer's nine (the worst, the average, blends, the best outcome it leaves)
+against the pursuers that do not catch it every time: chase, the interceptor, ``hj:model=rel4d``,
+pure pursuit and the learned ``--full-pursuer`` checkpoints.
 """
 
 from __future__ import annotations
@@ -59,7 +65,7 @@ from pecli.hj.reachability import available, solve_with_hj_reachability  # noqa:
 from pecli.hj.solver import solve  # noqa: E402
 from pecli.match import play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
-from pecli.policies.hj import INPUTS, HJPolicy, choose  # noqa: E402
+from pecli.policies.hj import INPUTS, HJPolicy, choose, evader_choice  # noqa: E402
 from pecli.scenario import Scenario, load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -227,7 +233,7 @@ class RatesEstimates(HJPolicy):
         scores, distances = self.outcomes(*((own, opp) if self.role == "pursuer" else (opp, own)))
         if self.role == "pursuer":
             return INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))]
-        return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
+        return INPUTS[evader_choice(scores, distances, best=self.best)]
 
 
 class KeepsEstimates(HJPolicy):
@@ -319,6 +325,53 @@ def causes(args: argparse.Namespace) -> None:
     for label, pursuer, evader in pairings:
         capture, time_to_capture = rate(base, pursuer, evader, args.episodes)
         print(f"| {label} | {capture:.3f} ({time_to_capture:.2f}) |")
+
+
+# ---------------------------------------------------------------------- the evader's rating
+class Rating(HJPolicy):
+    """The ``hj`` evader with another rating of its inputs over the pursuer's nine (``scores`` axis 1)."""
+
+    def __init__(self, scenario: Scenario, solution: Solution, rate) -> None:
+        super().__init__(scenario, "evader", solution)
+        self.rate = rate
+
+    def _act(self, view):
+        opp_pos, opp_vel = self._estimate(view)
+        own = np.concatenate([view.own_pos, view.own_vel], axis=1).T
+        opp = np.concatenate([opp_pos, opp_vel], axis=1).T
+        scores, distances = self.outcomes(opp, own)
+        scores[~self._mutual(view)] = 0.0
+        return INPUTS[choose(-self.rate(scores), -distances.mean(axis=1))]
+
+
+def _softmax_mean(scores: np.ndarray, temperature: float) -> np.ndarray:
+    weights = np.exp((scores - scores.max(axis=1, keepdims=True)) / temperature)
+    return (weights * scores).sum(axis=1) / weights.sum(axis=1)
+
+
+RATINGS = {
+    "worst": lambda s: s.min(axis=1),
+    "average (rules 2)": lambda s: s.mean(axis=1),
+    "half average, half best": lambda s: 0.5 * s.mean(axis=1) + 0.5 * s.max(axis=1),
+    "softmax-weighted, 5 steps": lambda s: _softmax_mean(s, 5.0),
+    "best (now)": lambda s: s.max(axis=1),
+}
+
+
+def ratings(args: argparse.Namespace) -> None:
+    base = load_scenario("point_mass")
+    full = seeing(base)
+    arena = solution_for(full, "abs8d")
+    pursuers = [("chase", "chase"), ("interceptor", "interceptor"), ("hj rel4d", "hj:model=rel4d"),
+                ("pure-pursuit", "pure-pursuit")]
+    pursuers += [(f"learned full ({Path(p).parent.parent.name})", p) for p in args.full_pursuer]
+    print(f"full observation: capture rate of the hj evader, {args.episodes} games per cell, seed 0\n")
+    print("| evader's rating | " + " | ".join(label for label, _ in pursuers) + " |")
+    print("| --- |" + " ---: |" * len(pursuers))
+    for name, rule in RATINGS.items():
+        cells = [rate(full, make_player(spec, "pursuer", full, base, 0), Rating(full, arena, rule), args.episodes)[0]
+                 for _, spec in pursuers]
+        print(f"| {name} | " + " | ".join(f"{c:.3f}" for c in cells) + " |", flush=True)
 
 
 # ---------------------------------------------------------------------- matrices
@@ -482,8 +535,11 @@ def main() -> None:
     t.add_argument("--episodes", type=int, default=EPISODES)
     t.add_argument("--seeds", type=int, default=3)
     t.add_argument("--out", default=str(ROOT / "runs" / "table2"))
+    r = sub.add_parser("ratings", help="the hj evader's rating of its inputs, one way at a time")
+    r.add_argument("--full-pursuer", nargs="*", default=[], help="learned pursuers trained under full observation")
+    r.add_argument("--episodes", type=int, default=EPISODES)
     args = parser.parse_args()
-    {"solve": solve_table, "causes": causes, "matrix": matrix, "table2": table2}[args.step](args)
+    {"solve": solve_table, "causes": causes, "matrix": matrix, "table2": table2, "ratings": ratings}[args.step](args)
 
 
 if __name__ == "__main__":

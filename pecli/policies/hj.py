@@ -6,15 +6,17 @@ capture, or, where it cannot within the solution's horizon, the horizon plus one
 approach (m) it can force. Each step a player plays the game's own step
 (:class:`~pecli.game.dynamics.PointMassDynamics`, walls included) for its nine inputs
 ``{-1, 0, 1}²`` against the opponent's nine, reads the score of each of the 81 outcomes (an outcome
-that is a capture scores -1), averages it over the opponent's inputs, and takes the input with the
-lowest average (the pursuer) or the highest (the evader). Averages within :data:`TIE` of the best
-are ties, which the average distance one step after the outcome decides: the pursuer closes in,
-the evader draws away. That is also the whole rule where the score is flat, for example where
-the value cannot tell the inputs apart in the open plane of a relative model. Where some input
-forces a capture within :data:`FORCE_STEPS` steps whatever the evader does (its worst outcome over
-the evader's nine inputs says so), the pursuer rates every input by its worst outcome instead of the
-average, and so takes the forcing one: near the capture set an average lets the evader's one
-escaping input through.
+that is a capture scores -1), and rates each of its inputs over the opponent's nine: the pursuer by
+the average (it takes the lowest), the evader by the best outcome the pursuer's inputs leave it
+(it takes the highest: the value already assumes the pursuer's best play from the next state on),
+where the value knows the walls (``abs8d``); with a relative model, whose value leads it into walls
+it does not know, the evader averages too. Ratings within :data:`TIE` of the best are ties, which
+the average distance one step after the outcome decides: the pursuer closes in, the evader draws
+away. That is also the whole rule where the score is flat, for example where the value cannot tell
+the inputs apart in the open plane of a relative model. Where some input forces a capture within :data:`FORCE_STEPS` steps whatever the
+evader does (its worst outcome over the evader's nine inputs says so), the pursuer rates every
+input by its worst outcome instead of the average, and so takes the forcing one: near the capture
+set an average lets the evader's one escaping input through.
 
 The state needs the opponent's position and velocity. While the opponent is seen they come from
 the observation. When it is not, the policy uses an estimate: the last sighting moved at its last
@@ -53,7 +55,7 @@ INPUTS = np.array([(x, y) for x in LEVELS for y in LEVELS])  # (9, 2), row 3 i +
 TIE = 1e-3  # score differences below this are ties (steps, or m of closest approach)
 CAPTURED = -1.0  # the score of an outcome that is a capture: better than any state
 FORCE_STEPS = 10.0  # where the worst case forces a capture within this many steps, the pursuer plays it
-RULES = 2  # the players' rule, in their identity: results cached under an older rule are not reused
+RULES = 3  # the players' rule, in their identity: results cached under an older rule are not reused
 
 
 def _pair_norm(gap: np.ndarray) -> np.ndarray:
@@ -76,6 +78,14 @@ def pursuer_choice(scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray
     worst = scores.max(axis=2)
     forced = mutual & (worst.min(axis=1) <= force)
     return choose(np.where(forced[:, None], worst, scores.mean(axis=2)), distances.mean(axis=2))
+
+
+def evader_choice(scores: np.ndarray, distances: np.ndarray, *, best: bool) -> np.ndarray:
+    """The evader's input ``(n,)`` from the scores and distances ``(n, 9 pursuer, 9 own inputs)``: the highest
+    best outcome over the pursuer's inputs (``best``) or the highest average; the largest average distance
+    among ties."""
+    rating = scores.max(axis=1) if best else scores.mean(axis=1)
+    return choose(-rating, -distances.mean(axis=1))
 
 
 class HJPolicy(HeuristicPolicy):
@@ -116,6 +126,7 @@ class HJPolicy(HeuristicPolicy):
         # a score at most this is a forced capture: capture steps within the solution's horizon, or, for a
         # solution scored by its value alone (no capture steps), a state in the capture set
         self.force = min(FORCE_STEPS, solution.problem.steps) if solution.capture_steps is not None else 0.0
+        self.best = self.grid.model == "abs8d"  # the evader's rating: the best outcome, where the value knows walls
         self.belief = belief
         self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
         self.opponent = self.dynamics[opponent_of(role)]
@@ -158,7 +169,7 @@ class HJPolicy(HeuristicPolicy):
         scores[~mutual] = 0.0  # only the distance decides (see the module)
         if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
             return INPUTS[pursuer_choice(scores, distances, mutual, self.force)]
-        return INPUTS[choose(-scores.mean(axis=1), -distances.mean(axis=1))]
+        return INPUTS[evader_choice(scores, distances, best=self.best)]
 
     def outcomes(self, pursuer: np.ndarray, evader: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scores after one step and distances (m) one step later still, ``(n, 9, 9)`` each: pursuer input ×

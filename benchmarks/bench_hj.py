@@ -65,7 +65,7 @@ from pecli.hj.reachability import available, solve_with_hj_reachability  # noqa:
 from pecli.hj.solver import solve  # noqa: E402
 from pecli.match import play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
-from pecli.policies.hj import INPUTS, HJPolicy, choose, evader_choice  # noqa: E402
+from pecli.policies.hj import INPUTS, HJPolicy, choose  # noqa: E402
 from pecli.scenario import Scenario, load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -233,7 +233,7 @@ class RatesEstimates(HJPolicy):
         scores, distances = self.outcomes(*((own, opp) if self.role == "pursuer" else (opp, own)))
         if self.role == "pursuer":
             return INPUTS[choose(scores.mean(axis=2), distances.mean(axis=2))]
-        return INPUTS[evader_choice(scores, distances, best=self.best)]
+        return INPUTS[self._evader_choice(scores, distances)]
 
 
 class KeepsEstimates(HJPolicy):
@@ -335,13 +335,8 @@ class Rating(HJPolicy):
         super().__init__(scenario, "evader", solution)
         self.rate = rate
 
-    def _act(self, view):
-        opp_pos, opp_vel = self._estimate(view)
-        own = np.concatenate([view.own_pos, view.own_vel], axis=1).T
-        opp = np.concatenate([opp_pos, opp_vel], axis=1).T
-        scores, distances = self.outcomes(opp, own)
-        scores[~self._mutual(view)] = 0.0
-        return INPUTS[choose(-self.rate(scores), -distances.mean(axis=1))]
+    def _evader_choice(self, scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
+        return choose(-self.rate(scores), -distances.mean(axis=1))
 
 
 def _softmax_mean(scores: np.ndarray, temperature: float) -> np.ndarray:

@@ -13,10 +13,10 @@ where the value knows the walls (``abs8d``); with a relative model, whose value 
 it does not know, the evader averages too. Ratings within :data:`TIE` of the best are ties, which
 the average distance one step after the outcome decides: the pursuer closes in, the evader draws
 away. That is also the whole rule where the score is flat, for example where the value cannot tell
-the inputs apart in the open plane of a relative model. Where some input forces a capture within :data:`FORCE_STEPS` steps whatever the
-evader does (its worst outcome over the evader's nine inputs says so), the pursuer rates every
-input by its worst outcome instead of the average, and so takes the forcing one: near the capture
-set an average lets the evader's one escaping input through.
+the inputs apart in the open plane of a relative model. Where some input forces a capture within
+:data:`FORCE_STEPS` steps whatever the evader does (its worst outcome over the evader's nine inputs
+says so), the pursuer rates every input by its worst outcome instead of the average, and so takes
+the forcing one: near the capture set an average lets the evader's one escaping input through.
 
 The state needs the opponent's position and velocity. While the opponent is seen they come from
 the observation. When it is not, the policy uses an estimate: the last sighting moved at its last
@@ -126,7 +126,7 @@ class HJPolicy(HeuristicPolicy):
         # a score at most this is a forced capture: capture steps within the solution's horizon, or, for a
         # solution scored by its value alone (no capture steps), a state in the capture set
         self.force = min(FORCE_STEPS, solution.problem.steps) if solution.capture_steps is not None else 0.0
-        self.best = self.grid.model == "abs8d"  # the evader's rating: the best outcome, where the value knows walls
+        self.best = self.grid.model == "abs8d"  # the evader rates by the best outcome where the value knows walls
         self.belief = belief
         self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
         self.opponent = self.dynamics[opponent_of(role)]
@@ -169,7 +169,11 @@ class HJPolicy(HeuristicPolicy):
         scores[~mutual] = 0.0  # only the distance decides (see the module)
         if self.role == "pursuer":  # own inputs on axis 1, the opponent's on axis 2
             return INPUTS[pursuer_choice(scores, distances, mutual, self.force)]
-        return INPUTS[evader_choice(scores, distances, best=self.best)]
+        return INPUTS[self._evader_choice(scores, distances)]
+
+    def _evader_choice(self, scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
+        """The evader's input index ``(n,)`` from the outcomes ``(n, 9 pursuer, 9 own inputs)``."""
+        return evader_choice(scores, distances, best=self.best)
 
     def outcomes(self, pursuer: np.ndarray, evader: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scores after one step and distances (m) one step later still, ``(n, 9, 9)`` each: pursuer input ×

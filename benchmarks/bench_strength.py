@@ -2,7 +2,7 @@
 
     python benchmarks/bench_strength.py train --schedules league alternating simultaneous --beliefs none bimdn \\
         --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
-    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500]
+    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H]
 
 ``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml) that the
 schedules, beliefs and seeds name, one at a time in this process, with the experiment's own code
@@ -21,7 +21,10 @@ CPU budget, then the same report::
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
 (circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
 final evader against pure pursuit. It prints the issue's targets met or missed, the pooled
-two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule.
+two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule. With ``--cpu-hours H``
+it takes each run's checkpoints of the round at which a run of budget ``H`` would have stopped (``--round N``:
+of round N, equal transitions instead of equal CPU), and leaves out runs not there yet: every schedule
+compared at any equal budget, while the runs are still training.
 """
 
 from __future__ import annotations
@@ -90,23 +93,44 @@ def train(args: argparse.Namespace) -> None:
               f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
 
-def final_players(zoo: Path, scenario_name: str) -> dict[str, dict[str, Path]]:
-    """Each run's newest main checkpoint per role: ``{run: {role: path}}``."""
+def final_players(zoo: Path, cpu_hours: float | None = None, round: int | None = None) -> dict[str, dict[str, Path]]:
+    """Each run's main checkpoint per role, ``{run: {role: path}}``: those of its newest round, of ``round``, or
+    with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where a run of that
+    budget would have stopped). A run not there yet is left out, and said so."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
-        if not RUN_NAME.fullmatch(state.parent.name):  # not a run of the strength experiment
+        name = state.parent.name
+        if not RUN_NAME.fullmatch(name):  # not a run of the strength experiment
             continue
-        turns = [t for t in json.loads(state.read_text())["turns"] if t.get("learner", "main") == "main"]
-        latest = {t["role"]: state.parent / t["checkpoint"] for t in turns}
-        if len(latest) == 2:
-            runs[state.parent.name] = latest
+        turns = json.loads(state.read_text())["turns"]
+        main = {(t["round"], t["role"]): state.parent / t["checkpoint"] for t in turns if t.get("learner", "main") == "main"}
+        done = sorted(r for r, role in main if role == "pursuer" and (r, "evader") in main)  # rounds both sides ended
+        spent = [sum(t["cpu_seconds"] for t in turns if t["round"] <= r) / 3600 for r in done]
+        chosen = done[-1:]
+        if cpu_hours is not None:
+            chosen = [r for r, hours in zip(done, spent) if hours >= cpu_hours][:1]
+        elif round is not None:
+            chosen = [r for r in done if r == round]
+        if not chosen:
+            where = (f"{max(spent, default=0.0):.2f} of {cpu_hours} CPU-h" if cpu_hours is not None
+                     else f"round {max(done, default=0)} of {round}" if round is not None else "no round")
+            print(f"{name}: left out, {where} so far", file=sys.stderr)
+            continue
+        runs[name] = {role: main[(chosen[0], role)] for role in ("pursuer", "evader")}
     if not runs:
-        sys.exit(f"no finished self-play rounds under {zoo}: run `train` first")
+        sys.exit(f"no self-play run under {zoo} has the rounds asked for: run `train` first, or ask for fewer")
     return runs
 
 
+def cpu_hours_to(checkpoint: Path) -> float:
+    """CPU hours its run had spent by the end of the round that wrote ``checkpoint`` (``<run>/<role>/round-NNN.zip``)."""
+    turns = json.loads((checkpoint.parent.parent / "selfplay.json").read_text())["turns"]
+    last = int(checkpoint.stem.split("-")[-1])
+    return sum(t["cpu_seconds"] for t in turns if t["round"] <= last) / 3600
+
+
 def report(args: argparse.Namespace) -> None:
-    runs = final_players(args.zoo, args.config)
+    runs = final_players(args.zoo, args.cpu_hours, args.round)
     scenario = load_scenario(args.config)
     found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
     by_path = {Path(p.spec).resolve(): p for role in found for p in found[role]}
@@ -127,9 +151,9 @@ def report(args: argparse.Namespace) -> None:
         r = results[(p.name, e.name)]
         return r.captures, r.episodes
 
-    print(f"| run | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | cross-play | "
+    print(f"| run | round | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | cross-play | "
           f"its evader vs pure pursuit | CPU-h |")
-    print("| --- | --- | --- | ---: | ---: | ---: |")
+    print("| --- | ---: | --- | --- | ---: | ---: | ---: |")
     missed = []
     pooled: dict[str, list[int]] = {}
     for name, pursuer in pursuers.items():
@@ -138,9 +162,10 @@ def report(args: argparse.Namespace) -> None:
         cross = [rate(pursuer, evaders[o]) for o in runs if o != name]
         held = rate(pure, evaders[name])
         cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
-        print(f"| {name} | {' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
+        print(f"| {name} | {runs[name]['pursuer'].stem.split('-')[-1].lstrip('0')} | "
+              f"{' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
-              f"{run_cpu_hours(args.zoo / name):.2f} |")
+              f"{cpu_hours_to(runs[name]['pursuer']):.2f} |")
         missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
                    if c / n < TARGETS["heuristics"]]
         missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
@@ -189,6 +214,10 @@ def main() -> None:
                                       "(default: the experiment's)")
     sub.choices["report"].add_argument("--episodes", type=int, default=500)
     sub.choices["report"].add_argument("--workers", type=int, default=2)
+    sub.choices["report"].add_argument("--cpu-hours", type=float, default=None,
+                                       help="compare every run at this CPU budget (default: each run's newest round)")
+    sub.choices["report"].add_argument("--round", type=int, default=None,
+                                       help="compare every run after this many rounds (equal transitions, not CPU)")
     args = parser.parse_args()
     train(args) if args.what == "train" else report(args)
 

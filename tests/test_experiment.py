@@ -211,6 +211,16 @@ def test_runs_start_schedule_by_schedule_with_every_kind_of_a_seed_together() ->
                      "none-alternating-s0", "bimdn-alternating-s0", "none-alternating-s1", "bimdn-alternating-s1"]
 
 
+def test_the_ranking_draws_its_pairings_over_runs_in_the_grids_own_order() -> None:
+    """Kind, then seed, then schedule, whatever order the runs start in: an experiment ranked before runs started
+    schedule by schedule keeps its random pairings."""
+    grid = {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1], "schedules": ["league", "alternating"]}
+    experiment = experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml")
+    names = [run.name for run in experiment.grid_order(experiment.runs())]
+    assert names == ["none-league-s0", "none-alternating-s0", "none-league-s1", "none-alternating-s1",
+                     "bimdn-league-s0", "bimdn-alternating-s0", "bimdn-league-s1", "bimdn-alternating-s1"]
+
+
 @pytest.mark.parametrize("schedule", ["selfplay", "league"])
 def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path, schedule: str) -> None:
     """A run whose budget is spent in round 1 stops there, well below its ceiling of 3 rounds, and a second

@@ -327,18 +327,13 @@ class ExperimentRunner:
         self._save()
         return results
 
-    def _grid_position(self, run: RunSpec) -> tuple[int, int, int]:
-        grid = self.experiment.spec.runs
-        return grid.kinds.index(run.kind), grid.seeds.index(run.seed), grid.schedules.index(run.schedule)
-
     def _rank(self, cluster: RayCluster) -> dict[str, dict[str, list[str]]]:
         """The paper's ranking: each checkpoint against ``sample`` random checkpoints of the other side; keeps
         the best ``keep`` per run and role by mean capture rate. Returns ``{run: {role: [paths]}}``."""
         from pecli.tournament import find_players, schedule
 
         settings = self.experiment.spec.ranking
-        # kind, seed, schedule: the order the random pairings were drawn in before runs started by schedule
-        runs = sorted((row.run for row in self.rows), key=self._grid_position)
+        runs = self.experiment.grid_order([row.run for row in self.rows])
         found = find_players([str(self.zoo / run.name) for run in runs], self.experiment.scenario)
         pairings = schedule(found.players, sample=settings.sample, seed=0)
         self._update("ranking")

@@ -212,6 +212,14 @@ class LoadedExperiment:
                                        else None))
         return out
 
+    def grid_order(self, runs: list[RunSpec]) -> list[RunSpec]:
+        """``runs`` in the grid's own order, kind, then seed, then schedule: the order the paper's ranking draws
+        its random pairings in (runs started in that order before :meth:`runs` changed it, and a ranking
+        resumed or repeated must draw the same pairings)."""
+        grid = self.spec.runs
+        return sorted(runs, key=lambda run: (grid.kinds.index(run.kind), grid.seeds.index(run.seed),
+                                             grid.schedules.index(run.schedule)))
+
 
 def experiment_from_dict(data: object, source: str, base: Path | None = None) -> LoadedExperiment:
     """Validate ``data`` (a parsed experiment file); ``base`` is the folder a relative scenario path is read from."""

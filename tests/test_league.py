@@ -73,6 +73,9 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
         again = read_metadata(run / f"exploiter-{t['role']}" / "round-002.zip")
         assert again.parent == "" and again.steps == 240
     assert "exploiter" in lines[0]
+    tensorboard = {str(path.relative_to(run / "tb")) for path in (run / "tb").glob("**/events.out.tfevents.*")}
+    assert {path.split("/events")[0] for path in tensorboard} == {
+        "pursuer_0", "evader_0", *(f"exploiter-{role}/r00{r}_0" for role in ("pursuer", "evader") for r in (1, 2))}
 
 
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:

@@ -153,6 +153,13 @@ def read_state(run: Run) -> SelfPlayState:
         raise PecliError(f"{path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
 
 
+def tensorboard_name(role: Role, kind: str, r: int) -> str:
+    """The TensorBoard run a turn logs to, under the run's ``tb/``: one per main learner (``pursuer_0``), and one
+    per exploiter turn (``exploiter-pursuer/r007_0``), since an exploiter that joined its pool starts again
+    from step 0 and would draw over the curves of the one before."""
+    return role if kind == MAIN else f"exploiter-{role}/r{r:03d}"
+
+
 def turn_seed(seed: int, round: int, role: Role, kind: str = MAIN) -> int:
     """The seed of one turn: fixed by the run's seed, so a resumed run plays the turns it would have."""
     entropy = [seed, round, ROLES.index(role)] + ([1] if kind == EXPLOITER else [])
@@ -453,7 +460,7 @@ class SelfPlay:
             try:
                 if remaining > 0:
                     model.learn(remaining, callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
-                                reset_num_timesteps=False, tb_log_name=role)
+                                reset_num_timesteps=False, tb_log_name=tensorboard_name(role, kind, r))
             finally:
                 display.close()
                 logger = getattr(model, "_logger", None)

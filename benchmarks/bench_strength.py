@@ -2,7 +2,7 @@
 
     python benchmarks/bench_strength.py train --schedules league alternating simultaneous --beliefs none bimdn \\
         --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
-    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H]
+    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
 
 ``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml) that the
 schedules, beliefs and seeds name, one at a time in this process, with the experiment's own code
@@ -93,27 +93,28 @@ def train(args: argparse.Namespace) -> None:
               f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
 
-def final_players(zoo: Path, cpu_hours: float | None = None, round: int | None = None) -> dict[str, dict[str, Path]]:
-    """Each run's main checkpoint per role, ``{run: {role: path}}``: those of its newest round, of ``round``, or
-    with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where a run of that
-    budget would have stopped). A run not there yet is left out, and said so."""
+def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None) -> dict[str, dict[str, Path]]:
+    """Each run's main checkpoint per role, ``{run: {role: path}}``: those of its newest round, of round
+    ``at_round``, or with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where
+    a run of that budget would have stopped). A run not there yet is left out, and said so."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
         name = state.parent.name
         if not RUN_NAME.fullmatch(name):  # not a run of the strength experiment
             continue
         turns = json.loads(state.read_text())["turns"]
-        main = {(t["round"], t["role"]): state.parent / t["checkpoint"] for t in turns if t.get("learner", "main") == "main"}
+        main = {(t["round"], t["role"]): state.parent / t["checkpoint"]
+                for t in turns if t.get("learner", "main") == "main"}
         done = sorted(r for r, role in main if role == "pursuer" and (r, "evader") in main)  # rounds both sides ended
         spent = [sum(t["cpu_seconds"] for t in turns if t["round"] <= r) / 3600 for r in done]
         chosen = done[-1:]
         if cpu_hours is not None:
             chosen = [r for r, hours in zip(done, spent) if hours >= cpu_hours][:1]
-        elif round is not None:
-            chosen = [r for r in done if r == round]
+        elif at_round is not None:
+            chosen = [r for r in done if r == at_round]
         if not chosen:
             where = (f"{max(spent, default=0.0):.2f} of {cpu_hours} CPU-h" if cpu_hours is not None
-                     else f"round {max(done, default=0)} of {round}" if round is not None else "no round")
+                     else f"round {max(done, default=0)} of {at_round}" if at_round is not None else "no round")
             print(f"{name}: left out, {where} so far", file=sys.stderr)
             continue
         runs[name] = {role: main[(chosen[0], role)] for role in ("pursuer", "evader")}
@@ -123,7 +124,7 @@ def final_players(zoo: Path, cpu_hours: float | None = None, round: int | None =
 
 
 def cpu_hours_to(checkpoint: Path) -> float:
-    """CPU hours its run had spent by the end of the round that wrote ``checkpoint`` (``<run>/<role>/round-NNN.zip``)."""
+    """CPU hours its run had spent by the end of the round that wrote ``checkpoint`` (``<run>/<role>/round-N.zip``)."""
     turns = json.loads((checkpoint.parent.parent / "selfplay.json").read_text())["turns"]
     last = int(checkpoint.stem.split("-")[-1])
     return sum(t["cpu_seconds"] for t in turns if t["round"] <= last) / 3600

@@ -194,6 +194,13 @@ class Curriculum(_Model):
 
     enabled: bool = True
     fraction: Real = Field(default=0.3, gt=0, le=1, description="share of the training budget it spans")
+    steps: Count | None = Field(default=None, ge=1, le=MAX_STEPS,
+                                description="learner transitions it spans, instead of a fraction of the budget "
+                                "(for runs a CPU budget stops, whose planned budget is only a ceiling)")
+
+    def span(self, budget: int) -> float:
+        """The learner transitions the curriculum spans in a run planned for ``budget`` of them."""
+        return float(self.steps) if self.steps is not None else max(1.0, self.fraction * budget)
 
 
 class BeliefSettings(_Model):

@@ -193,7 +193,7 @@ class _FakeModel:
 
 
 def test_curriculum_schedule(paper: Scenario) -> None:
-    callback = CurriculumCallback(paper, total_steps=1000, fraction=0.3)
+    callback = CurriculumCallback(paper, paper.training.curriculum.span(1000))
     env = callback.model = _FakeModel()  # type: ignore[assignment]
     for steps, fov, scale in ((0, 2 * math.pi, 0.0), (150, (2 * math.pi + 2 * math.pi / 3) / 2, 0.5), (300, 2 * math.pi / 3, 1.0),
                               (900, 2 * math.pi / 3, 1.0)):
@@ -202,6 +202,21 @@ def test_curriculum_schedule(paper: Scenario) -> None:
         name, got_fov, got_scale = env.calls[-1]
         assert name == "set_curriculum"
         assert got_fov == pytest.approx(fov) and got_scale == pytest.approx(scale)
+
+
+def test_a_curriculum_of_fixed_steps_ignores_the_budget(paper: Scenario) -> None:
+    """``curriculum.steps`` spans that many transitions whatever the planned budget (a CPU-budgeted run's
+    ceiling), where ``fraction`` stretches with it."""
+    from pecli.rl.train import with_overrides
+
+    fixed = with_overrides(paper, {"curriculum.steps": 400}).training.curriculum
+    assert [fixed.span(budget) for budget in (1_000, 10**7)] == [400.0, 400.0]
+    assert [paper.training.curriculum.span(budget) for budget in (1_000, 10**7)] == [300.0, 3e6]
+    callback = CurriculumCallback(paper, fixed.span(10**7))
+    env = callback.model = _FakeModel()  # type: ignore[assignment]
+    callback.num_timesteps = 400
+    callback._apply()
+    assert env.calls[-1][1:] == (pytest.approx(2 * math.pi / 3), pytest.approx(1.0))
 
 
 def test_evaluations_log_and_keep_the_best_checkpoint(tmp_path: Path) -> None:

@@ -84,16 +84,17 @@ def every_episodes(every: int, done: int, action: Callable[[int], None]) -> Call
 
 
 class CurriculumCallback(BaseCallback):
-    """Paper section V-A: over the first ``fraction`` of ``total_steps`` the pursuer's FOV shrinks
-    linearly from 2pi to its configured value and the evader's speed limit grows from 0 to its own.
+    """Paper section V-A: over the first ``span`` learner transitions (:meth:`pecli.scenario.Curriculum.span`)
+    the pursuer's FOV shrinks linearly from 2pi to its configured value and the evader's speed limit grows
+    from 0 to its own.
 
     The schedule follows ``model.num_timesteps``, so a resumed run continues it where it stopped.
     """
 
-    def __init__(self, scenario: Scenario, total_steps: int, fraction: float) -> None:
+    def __init__(self, scenario: Scenario, span: float) -> None:
         super().__init__()
         self.final_fov = scenario.pursuer.sensor.fov
-        self.span = max(1.0, fraction * total_steps)
+        self.span = max(1.0, span)
 
     def progress(self, steps: int | None = None) -> float:
         return min(1.0, (self.num_timesteps if steps is None else steps) / self.span)

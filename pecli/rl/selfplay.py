@@ -204,7 +204,7 @@ class Learner:
         self.callbacks: list[Any] = []
         self.curriculum: CurriculumCallback | None = None
         if t.curriculum.enabled:
-            self.curriculum = CurriculumCallback(job.scenario, state.curriculum_steps, t.curriculum.fraction)
+            self.curriculum = CurriculumCallback(job.scenario, t.curriculum.span(state.curriculum_steps))
             self.callbacks.append(self.curriculum)
         self.fit: FitBelief | None = None
         if isinstance(self.env, BeliefVecEnv):

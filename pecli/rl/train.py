@@ -280,7 +280,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
     callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
-        curriculum = CurriculumCallback(job.scenario, schedule, t.curriculum.fraction)
+        curriculum = CurriculumCallback(job.scenario, t.curriculum.span(schedule))
         curriculum.apply_to(env, model.num_timesteps)  # the games SB3 starts before any callback runs
         callbacks.insert(0, curriculum)
     if fit is not None:

@@ -277,7 +277,7 @@ class Objective:
             if belief.learned and env.buffer is not None:
                 callbacks.append(FitBelief(belief, env.buffer, t.belief_settings, scenario.arena.half))
         if t.curriculum.enabled and role == "pursuer":
-            curriculum = CurriculumCallback(scenario, t.steps, t.curriculum.fraction)
+            curriculum = CurriculumCallback(scenario, t.curriculum.span(t.steps))
             curriculum.apply_to(env, 0)
             callbacks.insert(0, curriculum)
 

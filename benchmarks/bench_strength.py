@@ -21,10 +21,10 @@ CPU budget, then the same report::
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
 (circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
 final evader against pure pursuit. It prints the issue's targets met or missed, the pooled
-two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule. With ``--cpu-hours H``
-it takes each run's checkpoints of the round at which a run of budget ``H`` would have stopped (``--round N``:
-of round N, equal transitions instead of equal CPU), and leaves out runs not there yet: every schedule
-compared at any equal budget, while the runs are still training.
+two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule. With
+``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
+stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
+out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
 """
 
 from __future__ import annotations
@@ -215,10 +215,11 @@ def main() -> None:
                                       "(default: the experiment's)")
     sub.choices["report"].add_argument("--episodes", type=int, default=500)
     sub.choices["report"].add_argument("--workers", type=int, default=2)
-    sub.choices["report"].add_argument("--cpu-hours", type=float, default=None,
-                                       help="compare every run at this CPU budget (default: each run's newest round)")
-    sub.choices["report"].add_argument("--round", type=int, default=None,
-                                       help="compare every run after this many rounds (equal transitions, not CPU)")
+    at = sub.choices["report"].add_mutually_exclusive_group()
+    at.add_argument("--cpu-hours", type=float, default=None,
+                    help="compare every run at this CPU budget (default: each run's newest round)")
+    at.add_argument("--round", type=int, default=None,
+                    help="compare every run after this many rounds (equal transitions per main learner, not CPU)")
     args = parser.parse_args()
     train(args) if args.what == "train" else report(args)
 

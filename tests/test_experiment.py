@@ -156,9 +156,13 @@ def test_an_edited_scenario_under_an_experiment_is_refused(tmp_path: Path) -> No
     game.write_text(game.read_text().replace("description:", "description: edited,"))
     prepare()  # the name and description are no part of the game
     recorded = yaml.safe_load((out / SCENARIO_FILE).read_text())
-    del recorded["training"]["batch_size"]  # a setting pecli added after the experiment started: its default
+    del recorded["training"]["n_step"]  # a setting pecli added after the experiment started: it ran at its default
     (out / SCENARIO_FILE).write_text(yaml.safe_dump(recorded))
-    prepare()
+    prepare()  # which the scenario keeps (quick.yaml leaves n_step at 1)
+    del recorded["training"]["batch_size"]  # quick.yaml sets 256: not the default the experiment ran at
+    (out / SCENARIO_FILE).write_text(yaml.safe_dump(recorded))
+    with pytest.raises(PecliError, match=r"training.batch_size: 512 \(its default\) -> 256"):
+        prepare()
 
 
 def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
@@ -209,6 +213,19 @@ def test_runs_start_schedule_by_schedule_with_every_kind_of_a_seed_together() ->
     names = [run.name for run in experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()]
     assert names == ["none-league-s0", "bimdn-league-s0", "none-league-s1", "bimdn-league-s1",
                      "none-alternating-s0", "bimdn-alternating-s0", "none-alternating-s1", "bimdn-alternating-s1"]
+
+
+def test_a_setting_added_since_a_run_started_is_a_change_only_where_set_otherwise(paper) -> None:
+    """A recorded scenario without a newer training setting ran at that setting's default."""
+    from pecli.experiment.pipeline import changes
+    from pecli.rl.train import with_overrides
+
+    recorded = paper.model_dump(mode="json")
+    del recorded["training"]["curriculum"]["steps"]  # recorded before pecli had the setting
+    assert changes(recorded, paper.model_dump(mode="json")) == []
+    later = with_overrides(paper, {"curriculum.steps": 400}).model_dump(mode="json")
+    assert changes(recorded, later) == ["training.curriculum.steps: None (its default) -> 400"]
+    assert changes(paper.model_dump(mode="json"), later) == ["training.curriculum.steps: None -> 400"]
 
 
 def test_the_ranking_draws_its_pairings_over_runs_in_the_grids_own_order() -> None:

@@ -35,7 +35,7 @@ from pecli.experiment.runs import RunProgress, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.roles import ROLES
-from pecli.scenario import dotted, read_yaml
+from pecli.scenario import Training, dotted, read_yaml
 
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster
@@ -391,10 +391,15 @@ class ExperimentRunner:
 
 def changes(old: Any, new: dict[str, Any]) -> list[str]:
     """The settings of the recorded scenario dump ``old`` that differ in ``new``, as ``key: old -> new``
-    (dotted keys). A setting ``old`` lacks (one added to pecli since) is not a change: it has its default."""
+    (dotted keys). A training setting ``old`` lacks (one added to pecli since) ran at its default: it is a
+    change only where ``new`` sets it otherwise."""
     before, after = dotted(old), dotted(new)
-    return [f"{key}: {before[key]} -> {after.get(key, '(no such setting)')}"
-            for key in sorted(before) if before[key] != after.get(key, object())]
+    added = {key: value for key, value in dotted(Training().model_dump(mode="json"), "training.").items()
+             if key not in before}
+    return [f"{key}: {before[key] if key in before else f'{added[key]} (its default)'} -> "
+            f"{after.get(key, '(no such setting)')}"
+            for key in sorted(before.keys() | added.keys())
+            if before.get(key, added.get(key)) != after.get(key, object()) and (key in before or key in after)]
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

@@ -394,12 +394,12 @@ def changes(old: Any, new: dict[str, Any]) -> list[str]:
     (dotted keys). A training setting ``old`` lacks (one added to pecli since) ran at its default: it is a
     change only where ``new`` sets it otherwise."""
     before, after = dotted(old), dotted(new)
-    added = {key: value for key, value in dotted(Training().model_dump(mode="json"), "training.").items()
-             if key not in before}
-    return [f"{key}: {before[key] if key in before else f'{added[key]} (its default)'} -> "
-            f"{after.get(key, '(no such setting)')}"
-            for key in sorted(before.keys() | added.keys())
-            if before.get(key, added.get(key)) != after.get(key, object()) and (key in before or key in after)]
+    defaults = dotted(Training().model_dump(mode="json"), "training.")
+    added = {key: defaults[key] for key in after.keys() & (defaults.keys() - before.keys())}  # ran at their defaults
+    recorded = {**added, **before}
+    shown = {key: f"{value} (its default)" for key, value in added.items()}
+    return [f"{key}: {shown.get(key, recorded[key])} -> {after.get(key, '(no such setting)')}"
+            for key in sorted(recorded) if recorded[key] != after.get(key, object())]
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

@@ -41,6 +41,7 @@ import yaml
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.experiment.pipeline import changes  # noqa: E402
+from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.experiment.spec import RunSpec, builtin_experiment_dir, experiment_from_dict  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
@@ -106,7 +107,7 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
         main = {(t["round"], t["role"]): state.parent / t["checkpoint"]
                 for t in turns if t.get("learner", "main") == "main"}
         done = sorted(r for r, role in main if role == "pursuer" and (r, "evader") in main)  # rounds both sides ended
-        spent = [sum(t["cpu_seconds"] for t in turns if t["round"] <= r) / 3600 for r in done]
+        spent = [cpu_through(turns, r) / 3600 for r in done]
         chosen = done[-1:]
         if cpu_hours is not None:
             chosen = [r for r, hours in zip(done, spent) if hours >= cpu_hours][:1]
@@ -126,8 +127,7 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
 def cpu_hours_to(checkpoint: Path) -> float:
     """CPU hours its run had spent by the end of the round that wrote ``checkpoint`` (``<run>/<role>/round-N.zip``)."""
     turns = json.loads((checkpoint.parent.parent / "selfplay.json").read_text())["turns"]
-    last = int(checkpoint.stem.split("-")[-1])
-    return sum(t["cpu_seconds"] for t in turns if t["round"] <= last) / 3600
+    return cpu_through(turns, int(checkpoint.stem.split("-")[-1])) / 3600
 
 
 def report(args: argparse.Namespace) -> None:

@@ -247,8 +247,8 @@ class ExperimentRunner:
 
     def _train(self, cluster: RayCluster) -> None:
         pending: dict[Any, RunStatus] = {}
-        # in the grid's order (schedule, seed, kind): a partly run grid has every kind of the first seeds of the
-        # first schedule rather than all seeds of a few kinds
+        # in the order runs start (LoadedExperiment.runs: schedule, seed, kind): a partly run grid has every kind
+        # of the first seeds of the first schedule rather than all seeds of a few kinds
         for row in self.rows:
             if row.progress.done:
                 row.status = "done"

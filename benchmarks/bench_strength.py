@@ -1,12 +1,13 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
     python benchmarks/bench_strength.py train --schedules league alternating simultaneous --beliefs none bimdn \\
-        --seeds 0 1 2 --cpu-hours 4 [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
+        --seeds 0 1 2 --cpu-hours 4 [--experiment strength] [--config tuned] [--rounds 150] [--steps-per-round 40000] \\
+        [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
 
-``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml) that the
-schedules, beliefs and seeds name, one at a time in this process, with the experiment's own code
-(:func:`pecli.experiment.runs.execute_run`): each stops after the first round at which its recorded CPU
+``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
+schedules`` takes that one's settings) that the schedules, beliefs and seeds name, one at a time in this
+process, with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the first round at which its recorded CPU
 time (the sum of its turns') reaches ``--cpu-hours``, so every schedule gets the same CPU, whatever a
 round costs it, and ``--rounds`` is a ceiling over which the curriculum is scheduled. Stopping it at any
 moment is safe; run it again to continue (each run resumes from its own durable state).
@@ -64,8 +65,9 @@ def run_cpu_hours(run: Path) -> float:
 
 
 def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
-    """The ``strength`` experiment's runs for the schedules, beliefs and seeds asked for, at ``--cpu-hours``."""
-    path = builtin_experiment_dir() / "strength.yaml"
+    """The runs of ``--experiment`` (``strength`` by default) for the schedules, beliefs and seeds asked for,
+    at ``--cpu-hours``."""
+    path = builtin_experiment_dir() / f"{args.experiment}.yaml"
     data = read_yaml(path)
     data["scenario"] = args.config
     data["runs"].update(kinds=args.beliefs, seeds=args.seeds, schedules=args.schedules, cpu_hours=args.cpu_hours)
@@ -203,6 +205,8 @@ def main() -> None:
         command = sub.add_parser(name)
         command.add_argument("--config", default="tuned")  # the strength experiment's settings
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    sub.choices["train"].add_argument("--experiment", default="strength", choices=["strength", "schedules"],
+                                      help="the built-in experiment whose settings the runs take (grid aside)")
     sub.choices["train"].add_argument("--schedules", nargs="+", default=["league", "alternating", "simultaneous"],
                                       choices=["alternating", "simultaneous", "league"])
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=["none", "bimdn"])

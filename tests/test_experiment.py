@@ -41,7 +41,7 @@ def test_builtin_experiments() -> None:
     from pecli.rl.selfplay import STATE_FILE
 
     assert SELFPLAY_STATE == STATE_FILE
-    assert {"smoke", "table1", "table1-small", "table2"} <= set(builtin_experiments())
+    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules"} <= set(builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
     assert len(small.runs()) == 15 and len({run.name for run in small.runs()}) == 15
@@ -50,6 +50,9 @@ def test_builtin_experiments() -> None:
     assert load_experiment("table2").scenario.name == "point_mass"
     smoke = load_experiment("smoke")
     assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200
+    schedules = load_experiment("schedules")  # the curriculum's span is fixed, whatever the CPU budget stops
+    assert [r.schedule for r in schedules.runs()] == ["league", "alternating", "simultaneous"]
+    assert all(r.cpu_hours == 1 and r.scenario.training.curriculum.span(6_000_000) == 300_000 for r in schedules.runs())
 
 
 @pytest.mark.parametrize(("change", "message"), [

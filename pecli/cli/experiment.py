@@ -79,7 +79,7 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
 @app.command()
 @user_errors
 def run(
-    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, smoke) or a "
+    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, schedules, smoke) or a "
                                               "YAML file.", show_default=False)],
     address: Annotated[
         str | None,

@@ -7,9 +7,10 @@
 
 ``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
 schedules`` takes that one's settings) that the schedules, beliefs and seeds name, one at a time in this
-process, with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the first round at which its recorded CPU
-time (the sum of its turns') reaches ``--cpu-hours``, so every schedule gets the same CPU, whatever a
-round costs it, and ``--rounds`` is a ceiling over which the curriculum is scheduled. Stopping it at any
+process, with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the
+first round at which its recorded CPU time (the sum of its turns') reaches ``--cpu-hours``, so every schedule
+gets the same CPU, whatever a round costs it, and ``--rounds`` is a ceiling (over which the curriculum is
+scheduled, unless the experiment fixes its span in transitions, as ``schedules`` does). Stopping it at any
 moment is safe; run it again to continue (each run resumes from its own durable state).
 
 The same runs as one Ray experiment (2 at a time here, as many as a cluster has cores), each to the same

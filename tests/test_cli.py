@@ -96,6 +96,21 @@ def test_config_commands() -> None:
     assert checked.exit_code == 0 and checked.stdout.count("ok") == 2
 
 
+def test_output_to_a_file_or_a_pipe_keeps_whole_table_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+    from pecli.cli.common import PIPE_WIDTH, _width
+
+    class Stream:
+        def __init__(self, tty: bool) -> None:
+            self.isatty = lambda: tty
+
+    monkeypatch.delenv("COLUMNS", raising=False)
+    assert _width(Stream(tty=False)) == PIPE_WIDTH and _width(Stream(tty=True)) is None
+    monkeypatch.setenv("COLUMNS", "100")  # the user's own width wins (Rich reads it)
+    assert _width(Stream(tty=False)) is None
+    listed = invoke("config", "list")  # the tests' output is a pipe: the table is as wide as it needs, not 80
+    assert max(len(line) for line in listed.stdout.splitlines()) > 80
+
+
 def test_python_dash_m_and_console_script() -> None:
     result = subprocess.run([sys.executable, "-m", "pecli", "--version"], capture_output=True, text=True, check=False)
     assert result.returncode == 0 and result.stdout.strip() == f"pecli {__version__}"

@@ -18,8 +18,18 @@ from pecli.errors import PecliError
 if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
-console = Console()
-err_console = Console(stderr=True)
+PIPE_WIDTH = 200
+"""Columns of output written to a file or a pipe: Rich cuts it to 80 otherwise, and a table of long run names
+loses them (``pecli experiment status out > status.txt``). ``COLUMNS`` still sets it; a terminal uses its own."""
+
+
+def _width(stream: object) -> int | None:
+    interactive = getattr(stream, "isatty", lambda: False)()
+    return None if interactive or "COLUMNS" in os.environ else PIPE_WIDTH
+
+
+console = Console(width=_width(sys.stdout))
+err_console = Console(stderr=True, width=_width(sys.stderr))
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -79,8 +79,8 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
 @app.command()
 @user_errors
 def run(
-    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, schedules, smoke) or a "
-                                              "YAML file.", show_default=False)],
+    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, "
+                                              "schedules, smoke) or a YAML file.", show_default=False)],
     address: Annotated[
         str | None,
         typer.Option("--address", help="Join a running Ray cluster: auto, HOST:PORT or ray://HOST:PORT "

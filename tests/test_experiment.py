@@ -258,6 +258,52 @@ def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path,
     assert execute_run(run, tmp_path)["did"] == "finished"
 
 
+class InlineCluster:
+    """The part of :class:`~pecli.experiment.ray_executor.RayCluster` that trains runs, in this process."""
+
+    def __init__(self) -> None:
+        self.trained: list[tuple[str, float | None]] = []
+
+    def submit_run(self, run, zoo: Path, marker: Path) -> int:
+        from pecli.experiment.runs import execute_run
+
+        self.trained.append((run.name, run.cpu_hours))
+        self.outcome = execute_run(run, zoo)
+        return len(self.trained)
+
+    @staticmethod
+    def wait(refs: list, timeout: float) -> list:
+        return list(refs)
+
+    def result(self, ref: int) -> dict:
+        return self.outcome
+
+
+def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_path: Path) -> None:
+    """A run of 2 rounds whose first round passes the pause's budget stops there, paused, and nothing is ranked;
+    called again without the pause, the same run trains its second round."""
+    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+            "runs": {**SMOKE["runs"], "rounds": 2}}
+    experiment = experiment_from_dict(data, "exp.yaml")
+    with pytest.raises(PecliError, match="positive number of hours"):
+        ExperimentRunner(experiment, tmp_path, until_cpu_hours=0)
+    cluster = InlineCluster()
+    paused = ExperimentRunner(experiment, tmp_path, until_cpu_hours=1e-6)
+    assert paused.run(cluster) is None  # type: ignore[arg-type]  # no ranking: InlineCluster plays no pairings
+    assert cluster.trained == [("none-s0", 1e-6)] and [row.status for row in paused.rows] == ["paused"]
+    (run,) = experiment.runs()
+    assert run_progress(run, tmp_path / "zoo").round == 1 and not run_progress(run, tmp_path / "zoo").done
+    state = json.loads((tmp_path / "experiment.json").read_text())
+    assert state["stages"]["train"] == "paused" and state["sessions"][-1]["ended"] == "paused"
+    assert ExperimentRunner(experiment, tmp_path, until_cpu_hours=1e-6).run(cluster) is None  # nothing to train
+    assert len(cluster.trained) == 1
+    again = ExperimentRunner(experiment, tmp_path)
+    again.prepare()
+    again._train(cluster)  # type: ignore[arg-type]
+    assert cluster.trained[-1] == ("none-s0", None) and run_progress(run, tmp_path / "zoo").done
+    assert [row.status for row in again.rows] == ["done"]
+
+
 def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:
     from pecli.experiment.pipeline import keep_best
     from pecli.scenario import load_scenario

@@ -25,8 +25,8 @@ app = typer.Typer(
     no_args_is_help=True,
 )
 
-STATUS_STYLE = {"done": "green", "running": "cyan", "failed": "red", "stopped": "yellow", "queued": "dim",
-                "pending": "dim"}
+STATUS_STYLE = {"done": "green", "running": "cyan", "failed": "red", "stopped": "yellow", "paused": "yellow",
+                "queued": "dim", "pending": "dim"}
 
 
 def _minutes(seconds: float) -> str:
@@ -90,6 +90,12 @@ def run(
     out: Annotated[Path | None, typer.Option("--out", help="The experiment's folder (default: "
                                              "runs/experiments/<name>); run again on it to continue.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live table.")] = False,
+    until_cpu_hours: Annotated[
+        float | None,
+        typer.Option("--until-cpu-hours",
+                     help="Train each self-play run only until it has used this many CPU-hours (at most its own "
+                     "budget), then stop before the ranking: every run at an equal budget first."),
+    ] = None,
 ) -> None:
     """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
 
@@ -97,6 +103,10 @@ def run(
     task holding one CPU; the tournaments' pairings are Ray tasks too. Interrupted (Ctrl-C, a killed
     driver, a lost worker), it continues with the same command: finished runs and played pairings are
     kept, unfinished runs continue from their last checkpoint.
+
+    On a small machine, [bold]--until-cpu-hours 1[/] brings every run to one CPU-hour before any goes
+    further (compare them with [bold]benchmarks/bench_strength.py report --cpu-hours 1[/]); run again
+    with a larger value, or without it, to go on.
     """
     from pecli.experiment import ExperimentRunner, RayCluster, load_experiment
 
@@ -119,7 +129,7 @@ def run(
         raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
 
     previous = signal.getsignal(signal.SIGTERM)
-    runner = ExperimentRunner(loaded, out, on_update=update)
+    runner = ExperimentRunner(loaded, out, on_update=update, until_cpu_hours=until_cpu_hours)
     again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
     cluster = RayCluster(address=address, cpus=cpus)  # refuses bad --cpus/--address before anything is written
     out.mkdir(parents=True, exist_ok=True)
@@ -151,6 +161,12 @@ def run(
     err_console.print(f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
                       f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",
                       highlight=False)
+    if report is None:
+        console.print(runs_table(runner.rows, f"experiment {loaded.name} in {out}"))
+        again = again.replace(f" --out {out}", f" --out {out} [--until-cpu-hours H]")
+        err_console.print(f"[yellow]paused[/]: every self-play run has trained to {until_cpu_hours:g} CPU-hours or "
+                          f"its end; the ranking waits for all of them: {again}", highlight=False)
+        return
     _print_report(out)
     err_console.print(f"wrote {report}, {out / 'report.json'}, {out / 'table.png'}", highlight=False)
 

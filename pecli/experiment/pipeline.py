@@ -69,10 +69,10 @@ class Session:
     started: float = field(default_factory=time.time)
     runs_started: int = 0
     runs_resumed: int = 0
-    runs_skipped: int = 0  # finished before this session
+    runs_skipped: int = 0  # finished (or paused at --until-cpu-hours) before this session
     pairings_played: int = 0
     pairings_cached: int = 0
-    ended: str = "running"  # running, done, interrupted, failed
+    ended: str = "running"  # running, done, paused (--until-cpu-hours), interrupted, failed
 
 
 def open_experiment(out: Path) -> LoadedExperiment:
@@ -161,12 +161,20 @@ class ExperimentRunner:
 
     ``on_update(rows, stage)`` is called about once a second while runs train and after every pairing,
     for a live view; ``stage`` says what is going on (``"training"``, ``"ranking 12/80"``, ...).
+
+    ``until_cpu_hours`` trains each self-play run only until it has used that much CPU (at most its own
+    budget), then stops before the ranking: every run at an equal budget first, the rest on a later call
+    with a larger value or none. One-role runs train to their end.
     """
 
     def __init__(self, experiment: LoadedExperiment, out: Path,
-                 on_update: Callable[[list[RunStatus], str], None] = lambda rows, stage: None) -> None:
+                 on_update: Callable[[list[RunStatus], str], None] = lambda rows, stage: None,
+                 until_cpu_hours: float | None = None) -> None:
+        if until_cpu_hours is not None and not until_cpu_hours > 0:
+            raise PecliError(f"--until-cpu-hours must be a positive number of hours, not {until_cpu_hours}")
         self.experiment = experiment
         self.out = out
+        self.until_cpu_hours = until_cpu_hours
         self.zoo = out / "zoo"
         self.on_update = on_update
         self.session = Session()
@@ -225,12 +233,17 @@ class ExperimentRunner:
         self.on_update(self.rows, self.stage)
 
     # -- the stages ----------------------------------------------------------------------------------
-    def run(self, cluster: RayCluster) -> Path:
-        """Run every stage not done yet; returns the report's Markdown file."""
+    def run(self, cluster: RayCluster) -> Path | None:
+        """Run every stage not done yet; returns the report's Markdown file, or None where ``until_cpu_hours``
+        paused runs short of their budget (the ranking waits for every run)."""
         if not self.prepared:
             self.prepare()
         try:
             self._train(cluster)
+            if self.stages["train"] == "paused":
+                self.session.ended = "paused"
+                self._save(ended="paused")
+                return None
             self._tournament(cluster, self._rank(cluster))
             path = self._report()
         except KeyboardInterrupt:
@@ -245,17 +258,28 @@ class ExperimentRunner:
         self._save(ended="done")
         return path
 
+    def _task(self, run: RunSpec) -> RunSpec:
+        """The run as its task trains it: with its CPU budget cut to ``until_cpu_hours``, if that is less."""
+        if self.until_cpu_hours is None or not run.selfplay:
+            return run
+        return run.model_copy(update={"cpu_hours": min(run.cpu_hours or self.until_cpu_hours, self.until_cpu_hours)})
+
+    def _trained(self, row: RunStatus) -> str:
+        """``done``, or ``paused`` for a run that reached ``until_cpu_hours`` short of its own budget."""
+        return "done" if row.progress.done else "paused"
+
     def _train(self, cluster: RayCluster) -> None:
         pending: dict[Any, RunStatus] = {}
         # in the order runs start (LoadedExperiment.runs: schedule, seed, kind): a partly run grid has every kind
         # of the first seeds of the first schedule rather than all seeds of a few kinds
         for row in self.rows:
-            if row.progress.done:
-                row.status = "done"
+            task = self._task(row.run)
+            if row.progress.done or (task is not row.run and run_progress(task, self.zoo).done):
+                row.status = self._trained(row)
                 self.session.runs_skipped += 1
                 continue
             row.status, row.error, row.submitted = "queued", "", time.time()
-            pending[cluster.submit_run(row.run, self.zoo, self.out / "tasks" / f"{row.run.name}.json")] = row
+            pending[cluster.submit_run(task, self.zoo, self.out / "tasks" / f"{row.run.name}.json")] = row
         self.stages["train"] = "running" if pending else "done"
         self._save()
         try:
@@ -270,7 +294,8 @@ class ExperimentRunner:
                         row.status = "failed"
                         row.error = f"{type(exc).__name__}: {exc} (its traceback is in Ray's logs, {RAY_LOGS})"
                     else:
-                        row.status = "done"
+                        row.progress = run_progress(row.run, self.zoo)
+                        row.status = self._trained(row)
                         if outcome["did"] == "started":
                             self.session.runs_started += 1
                         elif outcome["did"] == "resumed":
@@ -300,7 +325,7 @@ class ExperimentRunner:
             more = f" (and {len(failed) - 1} more)" if len(failed) > 1 else ""
             raise PecliError(f"run {failed[0].run.name} failed: {failed[0].error}{more}; "
                              "the others are saved: run the experiment again to retry")
-        self.stages["train"] = "done"
+        self.stages["train"] = "paused" if any(row.status == "paused" for row in self.rows) else "done"
         self._save()
 
     def _play(self, cluster: RayCluster, name: str, players: dict, pairings: list, episodes: int,

@@ -111,6 +111,23 @@ def test_output_to_a_file_or_a_pipe_keeps_whole_table_rows(monkeypatch: pytest.M
     assert max(len(line) for line in listed.stdout.splitlines()) > 80
 
 
+def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> None:
+    """Typer's rich help keeps a docstring's line breaks: every command's text is reflowed into paragraphs."""
+    from pecli.cli.app import reflow
+
+    assert reflow("""One line.
+
+        A paragraph wrapped
+        in the source.
+        """) == "One line.\n\nA paragraph wrapped in the source."
+    groups = [group.typer_instance for group in app.registered_groups]
+    commands = [*app.registered_commands, *(command for group in groups for command in group.registered_commands)]
+    docs = [c.callback.__doc__ for c in commands if c.callback.__doc__]
+    assert len(docs) > 20 and all("\n" not in doc.replace("\n\n", "") for doc in docs)
+    shown = runner.invoke(app, ["selfplay", "--help"], env={"COLUMNS": "200"})
+    assert "however the run stops, --resume continues from its newest checkpoint" in shown.stdout
+
+
 def test_python_dash_m_and_console_script() -> None:
     result = subprocess.run([sys.executable, "-m", "pecli", "--version"], capture_output=True, text=True, check=False)
     assert result.returncode == 0 and result.stdout.strip() == f"pecli {__version__}"

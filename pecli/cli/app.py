@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import os
 from typing import Annotated
 
@@ -58,6 +59,28 @@ app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")
 app.add_typer(export.app, name="export", rich_help_panel="Checkpoints")
 app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
 app.add_typer(hj.app, name="hj", rich_help_panel="Baselines")
+
+
+def reflow(doc: str) -> str:
+    """A docstring with each paragraph's lines joined (paragraphs stay apart): typer's rich help keeps line
+    breaks, so text wrapped for the source would come out ragged at the terminal's width."""
+    paragraphs = inspect.cleandoc(doc).split("\n\n")
+    return "\n\n".join(" ".join(line.strip() for line in paragraph.splitlines()) for paragraph in paragraphs)
+
+
+def _reflow_help(typer_app: typer.Typer) -> None:
+    callbacks = [command.callback for command in typer_app.registered_commands]
+    if typer_app.registered_callback is not None:
+        callbacks.append(typer_app.registered_callback.callback)
+    for callback in callbacks:
+        if callback is not None and callback.__doc__:
+            callback.__doc__ = reflow(callback.__doc__)
+    for group in typer_app.registered_groups:
+        if group.typer_instance is not None:
+            _reflow_help(group.typer_instance)
+
+
+_reflow_help(app)
 
 
 def main() -> None:

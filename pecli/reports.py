@@ -87,8 +87,8 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
         for j, pursuer in enumerate(pursuers):
             if (pursuer, evader) in grid:
                 rates[i, j] = grid[(pursuer, evader)].capture_rate
-    width = min(2 + 0.6 * len(pursuers), 30)
-    height = min(1.5 + 0.4 * len(evaders), 30)
+    width = min(max(4.0, 2 + 0.6 * len(pursuers)), 30)  # room for the labels of a grid of one or two players
+    height = min(max(3.0, 1.5 + 0.4 * len(evaders)), 30)
     fig, ax = plt.subplots(figsize=(width, height))
     image = ax.imshow(rates, vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
     ax.set_xticks(range(len(pursuers)), pursuers, rotation=60, ha="right", fontsize=7)
@@ -102,9 +102,8 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
                         color="black" if value > 0.6 else "white")
     fig.colorbar(image, ax=ax, label="capture rate")
     ax.set_title(f"{results.scenario.name}: capture rate", fontsize=9)
-    fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=110, format="png", bbox_inches="tight")  # the figure grows to fit long names
     plt.close(fig)
     return path
 

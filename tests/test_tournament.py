@@ -236,3 +236,23 @@ def test_an_impossible_batch_is_refused_before_it_is_allocated(tmp_path: Path) -
     assert result.exit_code == 1 and "more than one batch can play" in result.output
     played = runner.invoke(app, ["play", "-p", "pure-pursuit", "-e", "greedy", "-c", "quick", "-n", "10000000000"])
     assert played.exit_code == 1 and "more than one batch can play" in played.output and "Traceback" not in played.output
+
+
+def test_the_heatmap_of_a_small_grid_with_long_names_fits_them(tmp_path: Path) -> None:
+    """One pursuer and one evader named by their checkpoint paths: the figure grows to fit the labels instead of
+    Matplotlib warning that it could not (which a run with warnings as errors turned into a failure)."""
+    import warnings
+    from types import SimpleNamespace
+
+    from pecli.reports import heatmap
+
+    pursuer, evader = "none-s0/pursuer/round-002", "none-s0/evader/round-002"
+    results = SimpleNamespace(
+        grid=lambda: {(pursuer, evader): SimpleNamespace(capture_rate=0.5)},
+        players={"pursuer": [SimpleNamespace(name=pursuer)], "evader": [SimpleNamespace(name=evader)]},
+        scenario=SimpleNamespace(name="quick"),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        path = heatmap(results, tmp_path / "capture_rates.png")  # type: ignore[arg-type]
+    assert path.stat().st_size > 1000

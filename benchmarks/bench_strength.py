@@ -1,17 +1,17 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
-    python benchmarks/bench_strength.py train --schedules league alternating simultaneous --beliefs none bimdn \\
-        --seeds 0 1 2 --cpu-hours 4 [--experiment strength] [--config tuned] [--rounds 150] [--steps-per-round 40000] \\
-        [--zoo runs/bench_strength]
+    python benchmarks/bench_strength.py train [--experiment strength|schedules] [--schedules league alternating \\
+        simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] [--config tuned] [--rounds 150] \\
+        [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
 
-``train`` trains the runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
-schedules`` takes that one's settings) that the schedules, beliefs and seeds name, one at a time in this
-process, with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the
-first round at which its recorded CPU time (the sum of its turns') reaches ``--cpu-hours``, so every schedule
-gets the same CPU, whatever a round costs it, and ``--rounds`` is a ceiling (over which the curriculum is
-scheduled, unless the experiment fixes its span in transitions, as ``schedules`` does). Stopping it at any
-moment is safe; run it again to continue (each run resumes from its own durable state).
+``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
+schedules`` for that one), its grid and budget replaced by the options given, one at a time in this process,
+with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the first round
+at which its recorded CPU time (the sum of its turns') reaches its CPU budget, so every schedule gets the same
+CPU, whatever a round costs it, and ``--rounds`` is a ceiling (over which the curriculum is scheduled, unless
+the experiment fixes its span in transitions, as ``schedules`` does). Stopping it at any moment is safe; run
+it again to continue (each run resumes from its own durable state).
 
 The same runs as one Ray experiment (2 at a time here, as many as a cluster has cores), each to the same
 CPU budget, then the same report::
@@ -66,12 +66,14 @@ def run_cpu_hours(run: Path) -> float:
 
 
 def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
-    """The runs of ``--experiment`` (``strength`` by default) for the schedules, beliefs and seeds asked for,
-    at ``--cpu-hours``."""
+    """The runs of ``--experiment`` (``strength`` by default), its grid and budget replaced by the schedules,
+    beliefs, seeds, CPU budget and scenario given."""
     path = builtin_experiment_dir() / f"{args.experiment}.yaml"
     data = read_yaml(path)
-    data["scenario"] = args.config
-    data["runs"].update(kinds=args.beliefs, seeds=args.seeds, schedules=args.schedules, cpu_hours=args.cpu_hours)
+    if args.config is not None:
+        data["scenario"] = args.config
+    given = {"kinds": args.beliefs, "seeds": args.seeds, "schedules": args.schedules, "cpu_hours": args.cpu_hours}
+    data["runs"].update({key: value for key, value in given.items() if value is not None})
     if args.rounds is not None:
         data["runs"]["rounds"] = args.rounds
     if args.steps_per_round is not None:
@@ -204,15 +206,17 @@ def main() -> None:
     sub = parser.add_subparsers(dest="what", required=True)
     for name in ("train", "report"):
         command = sub.add_parser(name)
-        command.add_argument("--config", default="tuned")  # the strength experiment's settings
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    sub.choices["train"].add_argument("--config", default=None, help="the scenario (default: the experiment's)")
+    sub.choices["report"].add_argument("--config", default="tuned", help="the scenario the players play")
     sub.choices["train"].add_argument("--experiment", default="strength", choices=["strength", "schedules"],
-                                      help="the built-in experiment whose settings the runs take (grid aside)")
-    sub.choices["train"].add_argument("--schedules", nargs="+", default=["league", "alternating", "simultaneous"],
+                                      help="the built-in experiment whose runs and settings these are; the options "
+                                      "below replace its own")
+    sub.choices["train"].add_argument("--schedules", nargs="+", default=None,
                                       choices=["alternating", "simultaneous", "league"])
-    sub.choices["train"].add_argument("--beliefs", nargs="+", default=["none", "bimdn"])
-    sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    sub.choices["train"].add_argument("--cpu-hours", type=float, default=4.0)
+    sub.choices["train"].add_argument("--beliefs", nargs="+", default=None)
+    sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=None)
+    sub.choices["train"].add_argument("--cpu-hours", type=float, default=None)
     sub.choices["train"].add_argument("--steps-per-round", type=int, default=None,
                                       help="transitions per side per round (default: the experiment's)")
     sub.choices["train"].add_argument("--rounds", type=int, default=None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -96,19 +97,32 @@ def test_config_commands() -> None:
     assert checked.exit_code == 0 and checked.stdout.count("ok") == 2
 
 
-def test_output_to_a_file_or_a_pipe_keeps_whole_table_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_output_with_no_terminal_keeps_whole_table_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Under nohup or cron Rich would cut tables to 80 columns (run names elided): 200 there, the terminal's
+    width where one is attached, and ``COLUMNS`` wins over both."""
+    import io
+
+    from rich.console import Console
+    from rich.table import Table
+
     from pecli.cli.common import PIPE_WIDTH, _width
 
-    class Stream:
-        def __init__(self, tty: bool) -> None:
-            self.isatty = lambda: tty
+    def no_terminal(fd: int) -> os.terminal_size:
+        raise OSError("not a terminal")
 
     monkeypatch.delenv("COLUMNS", raising=False)
-    assert _width(Stream(tty=False)) == PIPE_WIDTH and _width(Stream(tty=True)) is None
-    monkeypatch.setenv("COLUMNS", "100")  # the user's own width wins (Rich reads it)
-    assert _width(Stream(tty=False)) is None
-    listed = invoke("config", "list")  # the tests' output is a pipe: the table is as wide as it needs, not 80
-    assert max(len(line) for line in listed.stdout.splitlines()) > 80
+    monkeypatch.setattr(os, "get_terminal_size", no_terminal)
+    assert _width() == PIPE_WIDTH
+    table = Table("run", "status")
+    table.add_row("bimdn-simultaneous-s2-" + "x" * 80, "running")
+    out = io.StringIO()
+    Console(file=out, width=_width()).print(table)
+    assert "x" * 80 in out.getvalue()  # at Rich's default of 80 columns the name is cut
+    monkeypatch.setenv("COLUMNS", "100")
+    assert _width() is None
+    monkeypatch.delenv("COLUMNS")
+    monkeypatch.setattr(os, "get_terminal_size", lambda fd: os.terminal_size((120, 40)))
+    assert _width() is None
 
 
 def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> None:
@@ -120,6 +134,7 @@ def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> 
         A paragraph wrapped
         in the source.
         """) == "One line.\n\nA paragraph wrapped in the source."
+    assert reflow("Title.\n\n\b\nkept\nas is") == "Title.\n\n\b\nkept\nas is"
     groups = [group.typer_instance for group in app.registered_groups]
     commands = [*app.registered_commands, *(command for group in groups for command in group.registered_commands)]
     docs = [c.callback.__doc__ for c in commands if c.callback.__doc__]

@@ -19,7 +19,7 @@ from pecli.cli import app
 from pecli.errors import ConfigError, PecliError
 from pecli.experiment import ExperimentRunner, builtin_experiments, load_experiment
 from pecli.experiment.runs import SELFPLAY_STATE, run_progress
-from pecli.experiment.spec import experiment_from_dict
+from pecli.experiment.spec import RunSpec, experiment_from_dict
 
 from conftest import hold
 
@@ -259,29 +259,33 @@ def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path,
 
 
 class InlineCluster:
-    """The part of :class:`~pecli.experiment.ray_executor.RayCluster` that trains runs, in this process."""
+    """The part of :class:`~pecli.experiment.ray_executor.RayCluster` that trains runs, in this process: a run
+    trains when submitted, and its ref is its index."""
 
     def __init__(self) -> None:
         self.trained: list[tuple[str, float | None]] = []
+        self.outcomes: list[dict] = []
 
-    def submit_run(self, run, zoo: Path, marker: Path) -> int:
+    def submit_run(self, run: RunSpec, zoo: Path, marker: Path) -> int:
         from pecli.experiment.runs import execute_run
 
         self.trained.append((run.name, run.cpu_hours))
-        self.outcome = execute_run(run, zoo)
-        return len(self.trained)
+        self.outcomes.append(execute_run(run, zoo))
+        return len(self.outcomes) - 1
 
     @staticmethod
-    def wait(refs: list, timeout: float) -> list:
+    def wait(refs: list[int], timeout: float) -> list[int]:
         return list(refs)
 
     def result(self, ref: int) -> dict:
-        return self.outcome
+        return self.outcomes[ref]
 
 
 def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_path: Path) -> None:
     """A run of 2 rounds whose first round passes the pause's budget stops there, paused, and nothing is ranked;
     called again without the pause, the same run trains its second round."""
+    from pecli.experiment.pipeline import stage_lines
+
     data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
             "runs": {**SMOKE["runs"], "rounds": 2}}
     experiment = experiment_from_dict(data, "exp.yaml")
@@ -295,6 +299,8 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     assert run_progress(run, tmp_path / "zoo").round == 1 and not run_progress(run, tmp_path / "zoo").done
     state = json.loads((tmp_path / "experiment.json").read_text())
     assert state["stages"]["train"] == "paused" and state["sessions"][-1]["ended"] == "paused"
+    assert stage_lines(tmp_path, state, alive=False) == ["training: paused, every run at 1e-06 CPU-h or its own "
+                                                         "budget (--until-cpu-hours)"]
     assert ExperimentRunner(experiment, tmp_path, until_cpu_hours=1e-6).run(cluster) is None  # nothing to train
     assert len(cluster.trained) == 1
     again = ExperimentRunner(experiment, tmp_path)

@@ -65,10 +65,12 @@ def reflow(doc: str) -> str:
     """A docstring with each paragraph's lines joined (paragraphs stay apart): typer's rich help keeps line
     breaks, so text wrapped for the source would come out ragged at the terminal's width."""
     paragraphs = inspect.cleandoc(doc).split("\n\n")
-    return "\n\n".join(" ".join(line.strip() for line in paragraph.splitlines()) for paragraph in paragraphs)
+    return "\n\n".join(paragraph if paragraph.startswith("\b") else  # click's mark: keep this one's lines
+                         " ".join(line.strip() for line in paragraph.splitlines()) for paragraph in paragraphs)
 
 
 def _reflow_help(typer_app: typer.Typer) -> None:
+    """:func:`reflow` every command's and callback's docstring, sub-apps included."""
     callbacks = [command.callback for command in typer_app.registered_commands]
     if typer_app.registered_callback is not None:
         callbacks.append(typer_app.registered_callback.callback)

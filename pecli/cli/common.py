@@ -19,17 +19,25 @@ if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
 PIPE_WIDTH = 200
-"""Columns of output written to a file or a pipe: Rich cuts it to 80 otherwise, and a table of long run names
-loses them (``pecli experiment status out > status.txt``). ``COLUMNS`` still sets it; a terminal uses its own."""
+"""Columns of output where no terminal is attached (``nohup``, cron, CI): Rich would cut it to 80, and a table of
+long run names loses them. ``COLUMNS`` still sets it; a terminal on stdin, stdout or stderr gives its own width."""
 
 
-def _width(stream: object) -> int | None:
-    interactive = getattr(stream, "isatty", lambda: False)()
-    return None if interactive or "COLUMNS" in os.environ else PIPE_WIDTH
+def _width() -> int | None:
+    """``None`` (Rich's own width: the terminal's, or ``COLUMNS``) unless no terminal is attached."""
+    if os.environ.get("COLUMNS", "").isdigit():
+        return None
+    for fd in (0, 1, 2):
+        try:
+            os.get_terminal_size(fd)
+        except (OSError, ValueError):
+            continue
+        return None
+    return PIPE_WIDTH
 
 
-console = Console(width=_width(sys.stdout))
-err_console = Console(stderr=True, width=_width(sys.stderr))
+console = Console(width=_width())
+err_console = Console(stderr=True, width=_width())
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -94,7 +94,8 @@ def run(
         float | None,
         typer.Option("--until-cpu-hours",
                      help="Train each self-play run only until it has used this many CPU-hours (at most its own "
-                     "budget), then stop before the ranking: every run at an equal budget first."),
+                     "budget); while any run is short of its own budget, stop before the ranking: every run at "
+                     "an equal budget first."),
     ] = None,
 ) -> None:
     """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
@@ -104,9 +105,10 @@ def run(
     driver, a lost worker), it continues with the same command: finished runs and played pairings are
     kept, unfinished runs continue from their last checkpoint.
 
-    On a small machine, [bold]--until-cpu-hours 1[/] brings every run to one CPU-hour before any goes
-    further (compare them with [bold]benchmarks/bench_strength.py report --cpu-hours 1[/]); run again
-    with a larger value, or without it, to go on.
+    On a machine smaller than the grid, [bold]--until-cpu-hours 1[/] brings every run to one CPU-hour
+    before any goes further (for the self-play schedules of [bold]strength[/] and [bold]schedules[/],
+    [bold]benchmarks/bench_strength.py report --cpu-hours 1[/] compares them there); run again with a
+    larger value, or without it, to go on.
     """
     from pecli.experiment import ExperimentRunner, RayCluster, load_experiment
 
@@ -161,11 +163,12 @@ def run(
     err_console.print(f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
                       f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",
                       highlight=False)
-    if report is None:
-        console.print(runs_table(runner.rows, f"experiment {loaded.name} in {out}"))
-        again = again.replace(f" --out {out}", f" --out {out} [--until-cpu-hours H]")
-        err_console.print(f"[yellow]paused[/]: every self-play run has trained to {until_cpu_hours:g} CPU-hours or "
-                          f"its end; the ranking waits for all of them: {again}", highlight=False)
+    if report is None:  # paused at --until-cpu-hours
+        if live is None:
+            console.print(runs_table(runner.rows, f"experiment {loaded.name} in {out}"))
+        err_console.print(f"[yellow]paused[/]: every self-play run has trained to {until_cpu_hours:g} CPU-h or "
+                          f"its own budget; the ranking waits for all of them: {again} [--until-cpu-hours H]",
+                          highlight=False)
         return
     _print_report(out)
     err_console.print(f"wrote {report}, {out / 'report.json'}, {out / 'table.png'}", highlight=False)

@@ -56,7 +56,7 @@ class RunStatus:
 
     run: RunSpec
     progress: RunProgress
-    status: str = "pending"  # pending, queued, running, done, failed
+    status: str = "pending"  # pending, queued, running, done, paused, failed, stopped
     error: str = ""
     submitted: float = 0.0
     host: str = ""
@@ -72,7 +72,8 @@ class Session:
     runs_skipped: int = 0  # finished (or paused at --until-cpu-hours) before this session
     pairings_played: int = 0
     pairings_cached: int = 0
-    ended: str = "running"  # running, done, paused (--until-cpu-hours), interrupted, failed
+    ended: str = "running"  # running, done, paused (at until_cpu_hours), interrupted, failed
+    until_cpu_hours: float | None = None  # --until-cpu-hours of this session
 
 
 def open_experiment(out: Path) -> LoadedExperiment:
@@ -112,6 +113,10 @@ def stage_lines(out: Path, state: dict[str, Any], alive: bool) -> list[str]:
     """The ranking's and the tournament's progress, one line each, from ``state``, whether its driver is
     ``alive``, and the pairings cached in ``out``: e.g. ``"ranking: running, 684/939 pairings played"``."""
     lines = []
+    sessions = state.get("sessions") or [{}]
+    if state.get("stages", {}).get("train") == "paused" and sessions[-1].get("until_cpu_hours"):
+        lines.append(f"training: paused, every run at {sessions[-1]['until_cpu_hours']:g} CPU-h or its own budget "
+                     "(--until-cpu-hours)")
     for name in ("ranking", "tournament"):
         stage = state.get("stages", {}).get(name)
         if not isinstance(stage, dict):
@@ -163,8 +168,8 @@ class ExperimentRunner:
     for a live view; ``stage`` says what is going on (``"training"``, ``"ranking 12/80"``, ...).
 
     ``until_cpu_hours`` trains each self-play run only until it has used that much CPU (at most its own
-    budget), then stops before the ranking: every run at an equal budget first, the rest on a later call
-    with a larger value or none. One-role runs train to their end.
+    budget) and, while any run is short of its own budget, stops before the ranking: every run at an equal
+    budget first, the rest on a later call with a larger value or none. One-role runs train to their end.
     """
 
     def __init__(self, experiment: LoadedExperiment, out: Path,
@@ -177,7 +182,7 @@ class ExperimentRunner:
         self.until_cpu_hours = until_cpu_hours
         self.zoo = out / "zoo"
         self.on_update = on_update
-        self.session = Session()
+        self.session = Session(until_cpu_hours=until_cpu_hours)
         self.rows = [RunStatus(run, run_progress(run, self.zoo)) for run in experiment.runs()]
         self.stage = "starting"
         self.prepared = False
@@ -266,7 +271,10 @@ class ExperimentRunner:
 
     def _trained(self, row: RunStatus) -> str:
         """``done``, or ``paused`` for a run that reached ``until_cpu_hours`` short of its own budget."""
-        return "done" if row.progress.done else "paused"
+        return "paused" if self.until_cpu_hours is not None and not row.progress.done else "done"
+
+    def _train_stage(self) -> str:
+        return "paused" if any(row.status == "paused" for row in self.rows) else "done"
 
     def _train(self, cluster: RayCluster) -> None:
         pending: dict[Any, RunStatus] = {}
@@ -280,12 +288,13 @@ class ExperimentRunner:
                 continue
             row.status, row.error, row.submitted = "queued", "", time.time()
             pending[cluster.submit_run(task, self.zoo, self.out / "tasks" / f"{row.run.name}.json")] = row
-        self.stages["train"] = "running" if pending else "done"
+        self.stages["train"] = "running" if pending else self._train_stage()
         self._save()
         try:
             while pending:
                 for ref in cluster.wait(list(pending), timeout=POLL_SECONDS):
                     row = pending.pop(ref)
+                    row.progress = run_progress(row.run, self.zoo)
                     try:
                         outcome = cluster.result(ref)
                     except PecliError as exc:
@@ -294,13 +303,11 @@ class ExperimentRunner:
                         row.status = "failed"
                         row.error = f"{type(exc).__name__}: {exc} (its traceback is in Ray's logs, {RAY_LOGS})"
                     else:
-                        row.progress = run_progress(row.run, self.zoo)
                         row.status = self._trained(row)
                         if outcome["did"] == "started":
                             self.session.runs_started += 1
                         elif outcome["did"] == "resumed":
                             self.session.runs_resumed += 1
-                    row.progress = run_progress(row.run, self.zoo)
                     self._save()
                 started = False
                 for row in pending.values():
@@ -325,7 +332,7 @@ class ExperimentRunner:
             more = f" (and {len(failed) - 1} more)" if len(failed) > 1 else ""
             raise PecliError(f"run {failed[0].run.name} failed: {failed[0].error}{more}; "
                              "the others are saved: run the experiment again to retry")
-        self.stages["train"] = "paused" if any(row.status == "paused" for row in self.rows) else "done"
+        self.stages["train"] = self._train_stage()
         self._save()
 
     def _play(self, cluster: RayCluster, name: str, players: dict, pairings: list, episodes: int,

@@ -95,7 +95,7 @@ def train(args: argparse.Namespace) -> None:
             outcome = execute_run(run, args.zoo, progress=True)
         except SelfPlayInterrupted as stop:
             sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
-        print(f"{run.name}: {outcome['did']}, {outcome['progress']['rounds']} rounds, "
+        print(f"{run.name}: {outcome['did']}, round {outcome['progress']['round']}, "
               f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
 

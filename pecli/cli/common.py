@@ -36,8 +36,9 @@ def _width() -> int | None:
     return PIPE_WIDTH
 
 
-console = Console(width=_width())
-err_console = Console(stderr=True, width=_width())
+_WIDTH = _width()
+console = Console(width=_WIDTH)
+err_console = Console(stderr=True, width=_WIDTH)
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -22,8 +22,11 @@ CPU budget, then the same report::
 ``report`` takes each run's newest main checkpoints and plays (``pecli.tournament``, cached in
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
 (circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
-final evader against pure pursuit. It prints the issue's targets met or missed, the pooled
-two-proportion z-test of ``bimdn`` against ``none`` pursuers, and a table per schedule. With
+final evader against pure pursuit. It prints the issue's targets met or missed, each schedule's pursuers
+pooled over evaders and seeds, and per schedule that has both, the two-proportion z-test of ``bimdn``
+against ``none`` pursuers (same schedule, same CPU) over the evaders that every one of them met: a run never
+meets its own evader, and the two kinds' evaders differ in strength, so each kind's cross-play alone would
+not compare like with like. With
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
@@ -135,6 +138,15 @@ def cpu_hours_to(checkpoint: Path) -> float:
     return cpu_through(turns, int(checkpoint.stem.split("-")[-1])) / 3600
 
 
+Faced = dict[str, dict[str, tuple[int, int]]]  # run -> each evader its pursuer met -> (captures, episodes)
+
+
+def pool(faced: Faced, runs: list[str], evaders: set[str] | None = None) -> tuple[int, int]:
+    """Captures and episodes of the pursuers of ``runs`` summed over the evaders they met (or ``evaders``)."""
+    rates = [r for name in runs for e, r in faced[name].items() if evaders is None or e in evaders]
+    return sum(c for c, _ in rates), sum(n for _, n in rates)
+
+
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.cpu_hours, args.round)
     scenario = load_scenario(args.config)
@@ -161,7 +173,8 @@ def report(args: argparse.Namespace) -> None:
           f"its evader vs pure pursuit | CPU-h |")
     print("| --- | ---: | --- | --- | ---: | ---: | ---: |")
     missed = []
-    pooled: dict[str, list[int]] = {}
+    faced: Faced = {}
+    groups: dict[tuple[str, str], list[str]] = {}  # (schedule, belief) -> its runs
     for name, pursuer in pursuers.items():
         heuristic = [rate(pursuer, scripted[e]) for e in HEURISTIC_EVADERS]
         adversary = [rate(pursuer, scripted[e]) for e in ADVERSARIES]
@@ -183,20 +196,23 @@ def report(args: argparse.Namespace) -> None:
         training = yaml.safe_load((args.zoo / name / "config.yaml").read_text())["training"]
         selfplay = training.get("selfplay", {})
         schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
-        for group in (training["belief"], f"schedule {schedule}"):
-            totals = pooled.setdefault(group, [0, 0])
-            for c, n in (*heuristic, *adversary, *cross):
-                totals[0] += c
-                totals[1] += n
-    print("\npursuers pooled over every evader (heuristics, adversaries, cross-play), per schedule at equal CPU:")
-    for group, (c, n) in sorted(pooled.items()):
-        if group.startswith("schedule "):
-            print(f"- {group[9:]}: {c / n:.3f} over {n} episodes")
-    if "bimdn" in pooled and "none" in pooled:
-        (cb, nb), (cn, nn) = pooled["bimdn"], pooled["none"]
+        faced[name] = {e: rate(pursuer, scripted[e]) for e in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+        faced[name].update({o: rate(pursuer, evaders[o]) for o in runs if o != name})
+        groups.setdefault((schedule, training["belief"]), []).append(name)
+    print("\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, at equal CPU:")
+    for schedule in sorted({s for s, _ in groups}):
+        kinds = {b: (pool(faced, names), len(names)) for (s, b), names in sorted(groups.items()) if s == schedule}
+        c, n = (sum(t[i] for t, _ in kinds.values()) for i in (0, 1))
+        each = ", ".join(f"{b} {cb / nb:.3f} ({k} run{'s' * (k > 1)})" for b, ((cb, nb), k) in kinds.items())
+        print(f"- {schedule}: {c / n:.3f} over {n} episodes; {each}")
+    for schedule in sorted({s for s, b in groups if b == "bimdn" and (s, "none") in groups}):
+        bimdn, none = groups[(schedule, "bimdn")], groups[(schedule, "none")]
+        common = set.intersection(*(set(faced[name]) for name in (*bimdn, *none)))  # not each other's own evaders
+        (cb, nb), (cn, nn) = pool(faced, bimdn, common), pool(faced, none, common)
         p = two_proportion_z_test(cb, nb, cn, nn)
         better = cb / nb > cn / nn and p < 0.05
-        print(f"\nbimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} pooled over every evader: p = {p:.2g} "
+        print(f"\n{schedule}: bimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} over the {len(common)} evaders every "
+              f"one of them met ({', '.join(sorted(common))}) and every seed: p = {p:.2g} "
               f"({'met' if better else 'NOT met'}: bimdn must capture more, p < 0.05)")
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
 

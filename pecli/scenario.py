@@ -245,6 +245,11 @@ class SelfPlay(_Model):
     league_floor: Real = Field(
         default=0.2, ge=0, le=1, description="(ours) league: the share of games the scripted players keep, together"
     )
+    league_floor_split: Literal["uniform", "pfsp"] = Field(
+        default="uniform",
+        description="(ours) league: the floor split among the scripted players alike (uniform), or by their pfsp "
+        "weights, most to those that still beat the learner (pfsp)",
+    )
     exploiter_join: Real = Field(
         default=0.5, gt=0, le=1,
         description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",

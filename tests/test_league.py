@@ -45,6 +45,22 @@ def test_the_scripted_players_keep_their_share() -> None:
     assert league.sum() == pytest.approx(1.0)
 
 
+def test_a_pfsp_floor_goes_to_the_scripted_players_that_still_win() -> None:
+    pool = OpponentPool("evader")
+    for name in ("greedy", "blindside"):
+        pool.add(name, name, generation=0)
+    pool.add("evader-r001", "evader/round-001.zip", generation=1)
+    for won in [True] * 30 + [False] * 70:  # blindside beats the learner 3 games in 10, greedy never
+        pool.observe("blindside", won)
+        pool.observe("greedy", False)
+    uniform, pfsp = pool.weights("league", floor=0.5), pool.weights("league", floor=0.5, split="pfsp")
+    assert uniform[:2].sum() == pytest.approx(pfsp[:2].sum())  # the scripted players' share is the floor's either way
+    assert pfsp[1] > uniform[1] > uniform[0] > pfsp[0]  # but the pfsp split gives blindside more of it, greedy less
+    assert pfsp.sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="unknown league floor split"):
+        pool.weights("league", floor=0.5, split="elo")
+
+
 def test_a_league_needs_the_alternating_schedule(quick: Scenario) -> None:
     with pytest.raises(ConfigError, match="needs the alternating schedule"):
         with_overrides(quick, {"selfplay.opponents": "league", "selfplay.schedule": "simultaneous"})

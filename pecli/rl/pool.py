@@ -10,7 +10,9 @@ Three ways to draw (``training.selfplay.opponents``):
              with a prior worth ``prior_episodes`` episodes: the prediction of a tournament's
              ratings when one rated both, else 0.5.
 ``league``   pfsp, with the scripted players (generation 0) keeping ``floor`` of the draws
-             between them whatever their records, so that a learner never forgets them.
+             between them whatever their records, so that a learner never forgets them; the floor
+             is split among them alike (``split="uniform"``) or by their pfsp weights (``"pfsp"``:
+             most to the scripted players that still beat the learner).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pecli.roles import Role
 from pecli.stats import ELO_SCALE
 
 STRATEGIES = ("latest", "uniform", "pfsp", "league")
+FLOOR_SPLITS = ("uniform", "pfsp")
 MIN_SHARE = 0.02  # (ours) pfsp never starves an entry: each keeps >= 2 % of a uniform draw's share
 
 
@@ -82,8 +85,10 @@ class OpponentPool:
         priors: dict[str, float] | None = None,
         prior_episodes: float = 10.0,
         floor: float = 0.0,
+        split: str = "uniform",
     ) -> np.ndarray:
-        """Draw probabilities of the entries under ``strategy``, ``(entries,)``."""
+        """Draw probabilities of the entries under ``strategy``, ``(entries,)``; ``floor`` and ``split``
+        only for ``league``."""
         if not self.entries:
             raise ValueError(f"the {self.role} pool is empty")
         k = len(self.entries)
@@ -95,8 +100,11 @@ class OpponentPool:
         elif strategy == "league":
             w = self.weights("pfsp", power, priors, prior_episodes)
             scripted = np.array([e.generation == 0 for e in self.entries], dtype=float)
+            if split not in FLOOR_SPLITS:
+                raise ValueError(f"unknown league floor split '{split}' (known: {', '.join(FLOOR_SPLITS)})")
             if 0 < scripted.sum() < k:
-                w = (1.0 - floor) * w + floor * scripted / scripted.sum()
+                share = scripted * w if split == "pfsp" else scripted
+                w = (1.0 - floor) * w + floor * share / share.sum()
         elif strategy == "pfsp":
             priors = priors or {}
             p = np.array([e.win_rate(priors.get(e.name, 0.5), prior_episodes) for e in self.entries])

@@ -294,7 +294,8 @@ class SelfPlay:
 
     def _weigher(self, learner: Role) -> Callable[[OpponentPool], np.ndarray]:
         sp, priors = self.settings, self._priors(learner)
-        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor)
+        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
+                                         sp.league_floor_split)
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:

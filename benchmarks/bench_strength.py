@@ -176,28 +176,30 @@ def report(args: argparse.Namespace) -> None:
     faced: Faced = {}
     groups: dict[tuple[str, str], list[str]] = {}  # (schedule, belief) -> its runs
     for name, pursuer in pursuers.items():
-        heuristic = [rate(pursuer, scripted[e]) for e in HEURISTIC_EVADERS]
-        adversary = [rate(pursuer, scripted[e]) for e in ADVERSARIES]
-        cross = [rate(pursuer, evaders[o]) for o in runs if o != name]
+        others = [o for o in runs if o != name]
+        faced[name] = {e: rate(pursuer, scripted[e]) for e in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+        faced[name].update({o: rate(pursuer, evaders[o]) for o in others})
+        heuristic = [faced[name][e] for e in HEURISTIC_EVADERS]
+        adversary = [faced[name][e] for e in ADVERSARIES]
+        cross = [faced[name][o] for o in others]
         held = rate(pure, evaders[name])
         cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
         print(f"| {name} | {runs[name]['pursuer'].stem.split('-')[-1].lstrip('0')} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
               f"{cpu_hours_to(runs[name]['pursuer']):.2f} |")
-        missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
+        missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
                    if c / n < TARGETS["heuristics"]]
-        missed += [f"{name} vs {e}: {c / n:.2f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
+        missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
                    if c / n < TARGETS["adversaries"]]
         if cross and cross_rate < TARGETS["cross-play"]:
-            missed.append(f"{name} cross-play: {cross_rate:.2f} < {TARGETS['cross-play']}")
+            missed.append(f"{name} cross-play: {cross_rate:.3f} < {TARGETS['cross-play']}")
         if held[0] / held[1] > TARGETS["pure-pursuit held to"]:
-            missed.append(f"{name}'s evader lets pure pursuit capture {held[0] / held[1]:.2f} > 0.25")
+            held_to = TARGETS["pure-pursuit held to"]
+            missed.append(f"{name}'s evader lets pure pursuit capture {held[0] / held[1]:.3f} > {held_to}")
         training = yaml.safe_load((args.zoo / name / "config.yaml").read_text())["training"]
         selfplay = training.get("selfplay", {})
         schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
-        faced[name] = {e: rate(pursuer, scripted[e]) for e in (*HEURISTIC_EVADERS, *ADVERSARIES)}
-        faced[name].update({o: rate(pursuer, evaders[o]) for o in runs if o != name})
         groups.setdefault((schedule, training["belief"]), []).append(name)
     print("\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, at equal CPU:")
     for schedule in sorted({s for s, _ in groups}):

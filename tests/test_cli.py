@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from pecli import __version__
 from pecli.cli import app
+from pecli.policies import builtin_names
 
 runner = CliRunner()
 
@@ -31,6 +32,13 @@ def test_help_lists_grouped_commands() -> None:
     assert result.exit_code == 0
     for text in ("play", "config", "Play and evaluate", "Scenarios"):
         assert text in result.stdout
+
+
+def test_play_help_names_every_builtin_player_of_each_side() -> None:
+    shown = runner.invoke(app, ["play", "--help"], env={"COLUMNS": "400"}).stdout
+    pursuer, evader = (line for line in shown.splitlines() if "A built-in name" in line)
+    assert all(name in pursuer for name in builtin_names("pursuer")) and "blindside" not in pursuer
+    assert all(name in evader for name in builtin_names("evader")) and "wall-runner" in evader
 
 
 def test_play_json() -> None:

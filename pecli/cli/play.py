@@ -22,7 +22,7 @@ from pecli.cli.common import (
 )
 from pecli.errors import PecliError
 from pecli.match import play_match
-from pecli.policies import resolve_policy
+from pecli.policies import builtin_names, resolve_policy
 
 POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
 
@@ -30,10 +30,10 @@ POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a polic
 @user_errors
 def play(
     pursuer: Annotated[
-        str, typer.Option("--pursuer", "-p", help=POLICY_HELP.format(names="pure-pursuit, random-walk"))
+        str, typer.Option("--pursuer", "-p", help=POLICY_HELP.format(names=", ".join(builtin_names("pursuer"))))
     ] = "pure-pursuit",
     evader: Annotated[
-        str, typer.Option("--evader", "-e", help=POLICY_HELP.format(names="greedy, random-walk, rash"))
+        str, typer.Option("--evader", "-e", help=POLICY_HELP.format(names=", ".join(builtin_names("evader"))))
     ] = "greedy",
     config: PlayersConfigOption = None,
     episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes to play, all at once.")] = 100,

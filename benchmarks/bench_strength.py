@@ -147,6 +147,16 @@ def pool(faced: Faced, runs: list[str], evaders: set[str] | None = None) -> tupl
     return sum(c for c, _ in rates), sum(n for _, n in rates)
 
 
+def print_cross_play(faced: Faced, runs: list[str]) -> None:
+    """Each run's pursuer (rows) against each other run's evader (columns): where cross-play is lost."""
+    print("\ncross-play: capture rate of each run's pursuer (row) against each other run's evader (column)\n")
+    print(f"| pursuer \\ evader | {' | '.join(runs)} |")
+    print(f"| --- |{' ---: |' * len(runs)}")
+    for name in runs:
+        cells = [f"{faced[name][o][0] / faced[name][o][1]:.2f}" if o in faced[name] else "—" for o in runs]
+        print(f"| {name} | {' | '.join(cells)} |")
+
+
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.cpu_hours, args.round)
     scenario = load_scenario(args.config)
@@ -201,6 +211,7 @@ def report(args: argparse.Namespace) -> None:
         selfplay = training.get("selfplay", {})
         schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
         groups.setdefault((schedule, training["belief"]), []).append(name)
+    print_cross_play(faced, list(runs))
     print("\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, at equal CPU:")
     for schedule in sorted({s for s, _ in groups}):
         kinds = {b: (pool(faced, names), len(names)) for (s, b), names in sorted(groups.items()) if s == schedule}

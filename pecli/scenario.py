@@ -250,6 +250,11 @@ class SelfPlay(_Model):
         description="(ours) league: the floor split among the scripted players alike (uniform), or by their pfsp "
         "weights, most to those that still beat the learner (pfsp)",
     )
+    league_exploiter_every: int = Field(
+        default=1, ge=0, le=100_000,
+        description="(ours) league: the exploiters train in every k-th round (1: every round, as AlphaStar's; 0: "
+        "never, the main agents' pools keep only the scripted players and their own checkpoints)",
+    )
     exploiter_join: Real = Field(
         default=0.5, gt=0, le=1,
         description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",

@@ -94,6 +94,20 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
         "pursuer_0", "evader_0", *(f"exploiter-{role}/r00{r}_0" for role in ("pursuer", "evader") for r in (1, 2))}
 
 
+@pytest.mark.parametrize("every, exploited", [(2, (2,)), (0, ())])
+def test_the_exploiters_train_every_kth_round_or_never(quick: Scenario, tmp_path: Path, every: int,
+                                                        exploited: tuple[int, ...]) -> None:
+    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_every": every})
+    SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None).run()
+    run = tmp_path / "lg"
+    turns, pools = state(run)["turns"], state(run)["pools"]
+    assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
+        (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter")[:1 + (r in exploited)]
+        for role in ("pursuer", "evader")]
+    assert (run / "exploiter-pursuer").is_dir() == bool(exploited)
+    assert {"circler", "blindside", "wall-runner"} <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
+
+
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     built = {"n": 0}
     original = selfplay_module.Learner

@@ -306,14 +306,15 @@ class SelfPlay:
         if simultaneous:
             beliefs = {role: self.scenario.training.belief != "none" for role in ROLES}
             games = SimultaneousGame(self.scenario, self.scenario.training.n_envs, self.job.seed, history=beliefs)
-        kinds = (MAIN, EXPLOITER) if self.settings.opponents == "league" else (MAIN,)
+        every = self.settings.league_exploiter_every if self.settings.opponents == "league" else 0
         for role in ROLES:
             placeholder = None if simultaneous else self._mixed(opponent_of(role))
             view = games.faces[role] if games is not None else None
             self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
-            if EXPLOITER in kinds:
+            if every:
                 self.exploiters[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, kind=EXPLOITER)
         for r in range(1, self.settings.rounds + 1):
+            kinds = (MAIN, EXPLOITER) if every and r % every == 0 else (MAIN,)
             if all(self.state.done(r, role, kind) for role in ROLES for kind in kinds):
                 continue
             if games is not None:

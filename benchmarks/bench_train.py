@@ -2,6 +2,7 @@
 
     python benchmarks/bench_train.py speed                  # env-steps/s: pecli train vs plain SB3, one run
     python benchmarks/bench_train.py optimizer              # CPU time per gradient step with each kind of Adam
+    python benchmarks/bench_train.py device                 # transitions/s with --device cpu and cuda, per belief
     python benchmarks/bench_train.py curves --minutes 10    # capture rate vs greedy over CPU time, 3 seeds
     python benchmarks/bench_train.py report                 # table + plot from finished curve runs
 
@@ -10,6 +11,12 @@
 frozen-opponent view with the centralised critic, once as plain SB3 TD3 ``MlpPolicy`` on the
 same game through ``DummyVecEnv`` of single-game envs (the learner's observation only). It
 reports learner transitions per second of each and their ratio, median of ``--repeats``.
+
+``device`` builds ``pecli train``'s learner (the pursuer against greedy, ``--config``'s settings) for each
+belief of ``--beliefs`` on each device of ``--devices``, fills its replay buffer and the BiMDN's warm-up, then
+times ``--steps`` learner transitions (gradient steps, belief fits and the belief features of each transition
+included) in wall-clock seconds: transitions per second on each device, and each device's ratio to the CPU
+(one torch thread, as pecli trains). Run it where there is a GPU; without one it measures the CPU alone.
 
 ``curves`` runs ``pecli train pursuer`` for each seed with a budget of ``--max-steps``
 transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluation against the
@@ -140,6 +147,49 @@ def optimizer(args: argparse.Namespace) -> None:
     for name, times in results.items():
         step = statistics.median(times)
         print(f"| {name} | {1000 * step:.2f} | {step / reference:.2f}x |")
+
+
+def device(args: argparse.Namespace) -> None:
+    """Wall-clock learner transitions per second of ``pecli train`` on each device, per belief."""
+    import torch as th
+
+    from pecli.policies import resolve_policy
+    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.scenario import load_scenario
+
+    th.set_num_threads(1)
+    devices = [d for d in args.devices if d == "cpu" or th.cuda.is_available()]
+    if devices != args.devices:
+        print(f"torch {th.__version__} sees no CUDA device: measuring {', '.join(devices)} only")
+    base = load_scenario(args.config)
+    rates: dict[tuple[str, str], float] = {}
+    for belief in args.beliefs:
+        scenario = with_overrides(base, {"belief": belief}, source="bench")
+        t = scenario.training
+        warm = max(t.learning_starts, t.belief_settings.warmup if belief != "none" else 0) + 16 * t.n_envs
+        for name in devices:
+            job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench",
+                           device=name)
+            env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
+            model = make_model(job, env, tensorboard=None)
+            fit = attach_belief(job, env, model)
+            model.learn(warm, callback=fit)  # a filled buffer, the BiMDN past its warm-up, every kernel built
+            if name.startswith("cuda"):
+                th.cuda.synchronize()
+            start = time.perf_counter()
+            model.learn(args.steps, callback=fit, reset_num_timesteps=False)
+            if name.startswith("cuda"):
+                th.cuda.synchronize()
+            rates[belief, name] = args.steps / (time.perf_counter() - start)
+            print(f"{belief} on {name}: {rates[belief, name]:,.0f} transitions/s", flush=True)
+    print(f"{base.name}: the pursuer against greedy, {args.steps} transitions after a warm-up, {base.training.n_envs} "
+          f"envs, {base.training.gradient_steps} gradient steps per vector step, batch {base.training.batch_size}, "
+          f"1 torch thread on the CPU")
+    print("| belief | device | transitions/s | ratio to cpu |")
+    print("| --- | --- | ---: | ---: |")
+    for (belief, name), rate in rates.items():
+        cpu = rates.get((belief, "cpu"))
+        print(f"| {belief} | {name} | {rate:,.0f} | {f'{rate / cpu:.2f}x' if cpu else '-'} |")
 
 
 def curves(args: argparse.Namespace) -> None:
@@ -312,6 +362,11 @@ def main() -> None:
     o.add_argument("--config", default="tuned")
     o.add_argument("--steps", type=int, default=1000)
     o.add_argument("--repeats", type=int, default=5)
+    d = sub.add_parser("device")
+    d.add_argument("--config", default="tuned")
+    d.add_argument("--beliefs", nargs="+", default=["none", "bimdn"])
+    d.add_argument("--devices", nargs="+", default=["cpu", "cuda"])
+    d.add_argument("--steps", type=int, default=8000, help="timed learner transitions per belief and device")
     c = sub.add_parser("curves")
     c.add_argument("--config", default="paper")
     c.add_argument("--belief", default="none")
@@ -339,7 +394,7 @@ def main() -> None:
     p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
     p.add_argument("--episodes", type=int, default=500)
     args = parser.parse_args()
-    {"speed": speed, "optimizer": optimizer, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
+    {"speed": speed, "optimizer": optimizer, "device": device, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
-from pecli.rl.belief import BeliefVecEnv, FitBelief
+from pecli.rl.belief import FitBelief
 from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
@@ -56,7 +56,7 @@ from pecli.rl.callbacks import (
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
-from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, resume_seed
+from pecli.rl.train import TrainJob, attach_belief, checkpoint_meta, make_env, make_model, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings
@@ -206,13 +206,9 @@ class Learner:
         if t.curriculum.enabled:
             self.curriculum = CurriculumCallback(job.scenario, t.curriculum.span(state.curriculum_steps))
             self.callbacks.append(self.curriculum)
-        self.fit: FitBelief | None = None
-        if isinstance(self.env, BeliefVecEnv):
-            belief = self.model.policy.actor.features_extractor.belief
-            self.env.set_belief(belief)
-            if belief.learned and self.env.buffer is not None:
-                self.fit = FitBelief(belief, self.env.buffer, t.belief_settings, job.scenario.arena.half)
-                self.callbacks.append(self.fit)
+        self.fit: FitBelief | None = attach_belief(self.train_job, self.env, self.model)
+        if self.fit is not None:
+            self.callbacks.append(self.fit)
         self.durable = DurableState(run.role_dir(self.folder) / RESUME_DIR)
         record = self.durable.read()
         latest = state.latest(role, kind)

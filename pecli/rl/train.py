@@ -189,6 +189,18 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
     )
 
 
+def attach_belief(job: TrainJob, env: Any, model: Any) -> FitBelief | None:
+    """Give the learner view of ``make_env`` the actor's belief (its features go into every transition) and return
+    the callback that fits it, for a learned belief; ``None`` where there is nothing to fit."""
+    if not isinstance(env, BeliefVecEnv):
+        return None
+    belief = model.policy.actor.features_extractor.belief
+    env.set_belief(belief)
+    if not belief.learned or env.buffer is None:
+        return None
+    return FitBelief(belief, env.buffer, job.scenario.training.belief_settings, job.scenario.arena.half)
+
+
 def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     """A function that plays the live model against ``opponent`` and returns the capture rate."""
     t = job.scenario.training
@@ -244,13 +256,7 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
     else:
         run.log_command()
-    belief = None
-    if isinstance(env, BeliefVecEnv):
-        belief = model.policy.actor.features_extractor.belief
-        env.set_belief(belief)
-    fit = None
-    if belief is not None and belief.learned and env.buffer is not None:
-        fit = FitBelief(belief, env.buffer, t.belief_settings, job.scenario.arena.half)
+    fit = attach_belief(job, env, model)
     episodes, cpu_before = 0, 0.0
     if record is not None:
         durable.restore(record, model, fit)

@@ -39,10 +39,9 @@ from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
 from pecli.policies.registry import builtin_names
-from pecli.rl.belief import BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import CurriculumCallback
 from pecli.rl.search_space import config_point, parse_space, suggest
-from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, with_overrides
+from pecli.rl.train import TrainJob, attach_belief, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 
@@ -270,12 +269,8 @@ class Objective:
         opponent = resolve_policy(job.opponent, opponent_of(role), scenario, seed=seed)
         env = make_env(job, opponent, seed)
         model = make_model(job, env, tensorboard=None)
-        callbacks: list[BaseCallback] = []
-        if isinstance(env, BeliefVecEnv):  # as pecli.rl.train.train
-            belief = model.policy.actor.features_extractor.belief
-            env.set_belief(belief)
-            if belief.learned and env.buffer is not None:
-                callbacks.append(FitBelief(belief, env.buffer, t.belief_settings, scenario.arena.half))
+        fit = attach_belief(job, env, model)
+        callbacks: list[BaseCallback] = [] if fit is None else [fit]
         if t.curriculum.enabled and role == "pursuer":
             curriculum = CurriculumCallback(scenario, t.curriculum.span(t.steps))
             curriculum.apply_to(env, 0)

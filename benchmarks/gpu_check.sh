@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# --device cuda end to end, on a machine with an NVIDIA GPU and torch already installed (pecli's own
+# dependencies installed, or their wheels in .whl/): train with the BiMDN belief on the GPU, stop and resume
+# there, play the checkpoint on the CPU, export it to ONNX, a self-play round on the GPU, and the speed of
+# training on each device (bench_train.py device). Prints PASS or the first failure; writes its logs to
+# ${OUT:-runs/gpu_check}.
+#   bash benchmarks/gpu_check.sh [steps timed per device, default 8000]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${OUT:-runs/gpu_check}
+mkdir -p "$out"
+if [ -d .whl ]; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl
+    export PYTHONPATH=/tmp/site:$PWD
+else
+    export PYTHONPATH=$PWD
+fi
+export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1
+zoo=$(mktemp -d)
+pecli() { python3 -m pecli "$@"; }
+
+python3 -c "import torch; print('torch', torch.__version__, 'on', torch.cuda.get_device_name(0))"
+step() { echo "== $*"; "$@" 2>&1 | tee -a "$out/check.log" | tail -n 4; }
+step pecli train pursuer -c quick --belief bimdn --steps 11000 --device cuda --zoo "$zoo" --name gpu -q
+step pecli train pursuer --resume --steps 13000 --device cuda --zoo "$zoo" --name gpu -q
+python3 - "$zoo/gpu/pursuer/final.zip" <<'EOF'
+import json, sys, zipfile
+meta = json.loads(open(sys.argv[1].replace(".zip", ".json")).read())
+assert meta["steps"] >= 13000, meta["steps"]
+print("resumed on the GPU to", meta["steps"], "transitions")
+EOF
+step pecli play --pursuer "$zoo/gpu/pursuer/final.zip" --evader greedy -c quick --episodes 50 --seed 0
+step pecli export onnx "$zoo/gpu/pursuer/final.zip" --out "$zoo/gpu.onnx"
+step pecli selfplay -c quick --belief bimdn --rounds 1 --steps-per-round 3000 --device cuda --zoo "$zoo" --name sp -q
+python3 benchmarks/bench_train.py device --steps "${1:-8000}" 2>&1 | tee "$out/device.md"
+echo PASS

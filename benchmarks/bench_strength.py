@@ -1,12 +1,12 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
-    python benchmarks/bench_strength.py train [--experiment strength|schedules] [--schedules league alternating \\
+    python benchmarks/bench_strength.py train [--experiment strength|schedules|FILE] [--schedules league alternating \\
         simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] [--config tuned] [--rounds 150] \\
         [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
-schedules`` for that one), its grid and budget replaced by the options given, one at a time in this process,
+schedules`` for that one, or an experiment file of your own), its grid and budget replaced by the options given, one at a time in this process,
 with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the first round
 at which its recorded CPU time (the sum of its turns') reaches its CPU budget, so every schedule gets the same
 CPU, whatever a round costs it, and ``--rounds`` is a ceiling (over which the curriculum is scheduled, unless
@@ -48,7 +48,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
-from pecli.experiment.spec import RunSpec, builtin_experiment_dir, experiment_from_dict  # noqa: E402
+from pecli.errors import ConfigError  # noqa: E402
+from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
 from pecli.scenario import load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
@@ -71,7 +72,10 @@ def run_cpu_hours(run: Path) -> float:
 def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     """The runs of ``--experiment`` (``strength`` by default), its grid and budget replaced by the schedules,
     beliefs, seeds, CPU budget and scenario given."""
-    path = builtin_experiment_dir() / f"{args.experiment}.yaml"
+    try:
+        path = experiment_path(args.experiment)
+    except ConfigError as error:
+        sys.exit(str(error))
     data = read_yaml(path)
     if args.config is not None:
         data["scenario"] = args.config
@@ -238,9 +242,9 @@ def main() -> None:
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
     sub.choices["train"].add_argument("--config", default=None, help="the scenario (default: the experiment's)")
     sub.choices["report"].add_argument("--config", default="tuned", help="the scenario the players play")
-    sub.choices["train"].add_argument("--experiment", default="strength", choices=["strength", "schedules"],
-                                      help="the built-in experiment whose runs and settings these are; the options "
-                                      "below replace its own")
+    sub.choices["train"].add_argument("--experiment", default="strength",
+                                      help="the experiment whose runs and settings these are: strength, schedules "
+                                      "or a YAML file of self-play runs; the options below replace its own")
     sub.choices["train"].add_argument("--schedules", nargs="+", default=None,
                                       choices=["alternating", "simultaneous", "league"])
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=None)

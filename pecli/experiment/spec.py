@@ -275,12 +275,18 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
             raise ConfigError(f"{source}: tournament.players.{i}: {exc}") from None
 
 
-def load_experiment(name_or_path: str | Path) -> LoadedExperiment:
-    """Read and validate an experiment from a YAML file or a built-in name (:func:`builtin_experiments`)."""
+def experiment_path(name_or_path: str | Path) -> Path:
+    """The YAML file of an experiment given as a file or a built-in name (:func:`builtin_experiments`)."""
     path = Path(name_or_path)
     if not path.is_file() and path.suffix not in (".yaml", ".yml") and len(path.parts) == 1:
         path = builtin_experiment_dir() / f"{name_or_path}.yaml"
     if not path.is_file():
         known = ", ".join(builtin_experiments())
         raise ConfigError(f"experiment not found: {name_or_path} (give a YAML file or one of: {known})")
+    return path
+
+
+def load_experiment(name_or_path: str | Path) -> LoadedExperiment:
+    """Read and validate an experiment from a YAML file or a built-in name (:func:`builtin_experiments`)."""
+    path = experiment_path(name_or_path)
     return experiment_from_dict(read_yaml(path), str(path), base=path.parent)

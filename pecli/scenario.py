@@ -397,6 +397,16 @@ def builtin_names() -> list[str]:
     return sorted(p.stem for p in builtin_config_dir().glob("*.yaml"))
 
 
+def builtin_experiment_dir() -> Path:
+    """The folder holding the built-in experiments (``configs/experiments``)."""
+    return builtin_config_dir() / "experiments"
+
+
+def builtin_experiments() -> list[str]:
+    """Names of the built-in experiments (``table1``, ``strength``, ...)."""
+    return sorted(p.stem for p in builtin_experiment_dir().glob("*.yaml"))
+
+
 def resolve_config_path(path_or_name: str | Path) -> Path:
     """A path as given, or the built-in config of that name."""
     path = Path(path_or_name)

@@ -41,6 +41,14 @@ def test_play_help_names_every_builtin_player_of_each_side() -> None:
     assert all(name in evader for name in builtin_names("evader")) and "wall-runner" in evader
 
 
+def test_experiment_run_help_names_every_builtin_experiment() -> None:
+    from pecli.scenario import builtin_experiments
+
+    shown = " ".join(runner.invoke(app, ["experiment", "run", "--help"], env={"COLUMNS": "400"}).stdout.split())
+    assert "strength-small" in builtin_experiments()
+    assert all(name in shown for name in builtin_experiments())
+
+
 def test_play_json() -> None:
     result = invoke("play", "--pursuer", "pure-pursuit", "--evader", "greedy", "-c", "quick", "-n", "40", "--json")
     assert result.exit_code == 0, result.output

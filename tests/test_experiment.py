@@ -41,7 +41,8 @@ def test_builtin_experiments() -> None:
     from pecli.rl.selfplay import STATE_FILE
 
     assert SELFPLAY_STATE == STATE_FILE
-    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules"} <= set(builtin_experiments())
+    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small"} <= set(
+        builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
     assert len(small.runs()) == 15 and len({run.name for run in small.runs()}) == 15
@@ -53,6 +54,11 @@ def test_builtin_experiments() -> None:
     schedules = load_experiment("schedules")  # the curriculum's span is fixed, whatever the CPU budget stops
     assert [r.schedule for r in schedules.runs()] == ["league", "alternating", "simultaneous"]
     assert all(r.cpu_hours == 1 and r.scenario.training.curriculum.span(6_000_000) == 300_000 for r in schedules.runs())
+    small = load_experiment("strength-small")  # the league as measured best at half a CPU-hour: no exploiters
+    assert [(r.kind, r.seed, r.schedule) for r in small.runs()] == [
+        (kind, seed, "league") for seed in (0, 1, 2) for kind in ("none", "bimdn")]
+    league = small.runs()[0].scenario.training.selfplay
+    assert (league.opponents, league.league_exploiter_every, league.league_floor_split) == ("league", 0, "pfsp")
 
 
 @pytest.mark.parametrize(("change", "message"), [

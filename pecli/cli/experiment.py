@@ -15,6 +15,7 @@ from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
 from pecli.locks import locked
+from pecli.scenario import builtin_experiments
 
 if TYPE_CHECKING:
     from pecli.experiment.pipeline import RunStatus
@@ -79,8 +80,8 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
 @app.command()
 @user_errors
 def run(
-    experiment: Annotated[str, typer.Argument(help="A built-in experiment (table1, table1-small, table2, strength, "
-                                              "schedules, smoke) or a YAML file.", show_default=False)],
+    experiment: Annotated[str, typer.Argument(help=f"A built-in experiment ({', '.join(builtin_experiments())}) "
+                                              "or a YAML file.", show_default=False)],
     address: Annotated[
         str | None,
         typer.Option("--address", help="Join a running Ray cluster: auto, HOST:PORT or ray://HOST:PORT "

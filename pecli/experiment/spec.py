@@ -32,7 +32,14 @@ from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
 from pecli.match import MAX_EPISODES
 from pecli.roles import Role
-from pecli.scenario import Scenario, builtin_config_dir, load_scenario, read_yaml, validation_message
+from pecli.scenario import (  # noqa: F401 (the built-in experiments' names are this module's too)
+    Scenario,
+    builtin_experiment_dir,
+    builtin_experiments,
+    load_scenario,
+    read_yaml,
+    validation_message,
+)
 
 BeliefKind = Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"]
 Schedule = Literal["selfplay", "alternating", "simultaneous", "league", "pursuer", "evader"]
@@ -152,15 +159,6 @@ class RunSpec(BaseModel):
     @property
     def roles(self) -> tuple[Role, ...]:
         return ("pursuer", "evader") if self.selfplay else (self.schedule,)  # type: ignore[return-value]
-
-
-def builtin_experiment_dir() -> Path:
-    """The folder holding the built-in experiments (``configs/experiments``)."""
-    return builtin_config_dir() / "experiments"
-
-
-def builtin_experiments() -> list[str]:
-    return sorted(p.stem for p in builtin_experiment_dir().glob("*.yaml"))
 
 
 def _flatten(data: dict, prefix: str = "") -> dict[str, object]:

@@ -1,17 +1,18 @@
 """How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
 
-    python benchmarks/bench_strength.py train [--experiment strength|schedules|FILE] [--schedules league alternating \\
-        simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] [--config tuned] [--rounds 150] \\
-        [--steps-per-round 40000] [--zoo runs/bench_strength]
+    python benchmarks/bench_strength.py train [--experiment strength|strength-small|schedules|FILE] \\
+        [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
+        [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
-schedules`` for that one, or an experiment file of your own), its grid and budget replaced by the options given, one at a time in this process,
-with the experiment's own code (:func:`pecli.experiment.runs.execute_run`): each stops after the first round
-at which its recorded CPU time (the sum of its turns') reaches its CPU budget, so every schedule gets the same
-CPU, whatever a round costs it, and ``--rounds`` is a ceiling (over which the curriculum is scheduled, unless
-the experiment fixes its span in transitions, as ``schedules`` does). Stopping it at any moment is safe; run
-it again to continue (each run resumes from its own durable state).
+schedules`` or ``strength-small`` for those, or an experiment file of your own), its grid and budget replaced by
+the options given, one at a time in this process, with the experiment's own code
+(:func:`pecli.experiment.runs.execute_run`): each stops after the first round at which its recorded CPU time
+(the sum of its turns') reaches its CPU budget, so every schedule gets the same CPU, whatever a round costs it,
+and ``--rounds`` is a ceiling (over which the curriculum is scheduled, unless the experiment fixes its span in
+transitions, as ``schedules`` does). Stopping it at any moment is safe; run it again to continue (each run
+resumes from its own durable state).
 
 The same runs as one Ray experiment (2 at a time here, as many as a cluster has cores), each to the same
 CPU budget, then the same report::
@@ -243,8 +244,9 @@ def main() -> None:
     sub.choices["train"].add_argument("--config", default=None, help="the scenario (default: the experiment's)")
     sub.choices["report"].add_argument("--config", default="tuned", help="the scenario the players play")
     sub.choices["train"].add_argument("--experiment", default="strength",
-                                      help="the experiment whose runs and settings these are: strength, schedules "
-                                      "or a YAML file of self-play runs; the options below replace its own")
+                                      help="the experiment whose runs and settings these are: strength, "
+                                      "strength-small, schedules or a YAML file of self-play runs; the options "
+                                      "below replace its own")
     sub.choices["train"].add_argument("--schedules", nargs="+", default=None,
                                       choices=["alternating", "simultaneous", "league"])
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=None)

@@ -394,7 +394,9 @@ def main() -> None:
     p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
     p.add_argument("--episodes", type=int, default=500)
     args = parser.parse_args()
-    {"speed": speed, "optimizer": optimizer, "device": device, "curves": curves, "report": report, "selfplay": selfplay}[args.step](args)
+    steps = {"speed": speed, "optimizer": optimizer, "device": device, "curves": curves, "report": report,
+             "selfplay": selfplay}
+    steps[args.step](args)
 
 
 if __name__ == "__main__":

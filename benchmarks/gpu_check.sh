@@ -24,7 +24,7 @@ step() { echo "== $*"; "$@" 2>&1 | tee -a "$out/check.log" | tail -n 4; }
 step pecli train pursuer -c quick --belief bimdn --steps 11000 --device cuda --zoo "$zoo" --name gpu -q
 step pecli train pursuer --resume --steps 13000 --device cuda --zoo "$zoo" --name gpu -q
 python3 - "$zoo/gpu/pursuer/final.zip" <<'EOF'
-import json, sys, zipfile
+import json, sys
 meta = json.loads(open(sys.argv[1].replace(".zip", ".json")).read())
 assert meta["steps"] >= 13000, meta["steps"]
 print("resumed on the GPU to", meta["steps"], "transitions")

@@ -57,8 +57,7 @@ TEST_EPISODES = 500
 
 def speed(args: argparse.Namespace) -> None:
     from pecli.policies import resolve_policy
-    from pecli.rl.belief import BeliefVecEnv, FitBelief
-    from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
     from pecli.scenario import load_scenario
 
     base = load_scenario(args.config)
@@ -69,12 +68,8 @@ def speed(args: argparse.Namespace) -> None:
             job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench")
             env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
             model = make_model(job, env, tensorboard=None)
-            callbacks = []
-            if isinstance(env, BeliefVecEnv):
-                belief = model.policy.actor.features_extractor.belief
-                env.set_belief(belief)
-                if env.buffer is not None:
-                    callbacks.append(FitBelief(belief, env.buffer, scenario.training.belief_settings, scenario.arena.half))
+            fit = attach_belief(job, env, model)
+            callbacks = [] if fit is None else [fit]
             model.learn(1000, callback=callbacks)  # warm-ups over: learning and fitting both run below
             start = time.perf_counter()
             model.learn(args.steps, callback=callbacks, reset_num_timesteps=False)

@@ -51,9 +51,8 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
     import torch as th
 
     from pecli.policies import resolve_policy
-    from pecli.rl.belief import FitBelief
     from pecli.rl.durable import DurableState, Ring, _write_chunk, replay_arrays
-    from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
     from pecli.scenario import load_scenario
 
     th.set_num_threads(1)
@@ -64,11 +63,7 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
         job = TrainJob("pursuer", scenario, "greedy", Path("unused"), "bench")
         env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
         model = make_model(job, env, None)
-        fit = None
-        if belief != "none":
-            model_belief = model.policy.actor.features_extractor.belief
-            env.set_belief(model_belief)
-            fit = FitBelief(model_belief, env.buffer, t.belief_settings, scenario.arena.half)
+        fit = attach_belief(job, env, model)
         rng = np.random.default_rng(0)
         buffer = model.replay_buffer
         for array in replay_arrays(buffer).values():  # a full buffer of plausible values

@@ -75,6 +75,7 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     beliefs, seeds, CPU budget and scenario given."""
     try:
         path = experiment_path(args.experiment)
+        experiment_from_dict(read_yaml(path), str(path), base=path.parent)  # the file as written is valid
     except ConfigError as error:
         sys.exit(str(error))
     data = read_yaml(path)
@@ -86,7 +87,10 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
         data["runs"]["rounds"] = args.rounds
     if args.steps_per_round is not None:
         data["runs"]["steps_per_round"] = args.steps_per_round
-    return experiment_from_dict(data, str(path), base=path.parent).runs()
+    try:
+        return experiment_from_dict(data, str(path), base=path.parent).runs()
+    except ConfigError as error:  # an option that the experiment's checks refuse (a belief kind, a budget)
+        sys.exit(str(error))
 
 
 def train(args: argparse.Namespace) -> None:

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # --device cuda end to end, on a machine with an NVIDIA GPU and torch already installed (pecli's own
-# dependencies installed, or their wheels in .whl/): train with the BiMDN belief on the GPU, stop and resume
-# there, play the checkpoint on the CPU, export it to ONNX, a self-play round on the GPU, and the speed of
-# training on each device (bench_train.py device). Prints PASS or the first failure; writes its logs to
-# ${OUT:-runs/gpu_check}.
+# dependencies installed, or their wheels in .whl/): train with the BiMDN belief on the GPU, resume the run
+# there with a larger budget (replay buffer and belief fitter restored), play the checkpoint on the CPU, export
+# it to ONNX, a self-play round on the GPU, and the speed of training on each device (bench_train.py device).
+# Prints PASS, or FAIL and the failed command; writes its logs to ${OUT:-runs/gpu_check} (relative to the
+# repository's root).
 #   bash benchmarks/gpu_check.sh [steps timed per device, default 8000]
-set -euo pipefail
+set -Eeuo pipefail
+trap 'echo "FAIL: $BASH_COMMAND" >&2' ERR
 cd "$(dirname "$0")/.."
 out=${OUT:-runs/gpu_check}
 mkdir -p "$out"
@@ -25,12 +27,13 @@ step pecli train pursuer -c quick --belief bimdn --steps 11000 --device cuda --z
 step pecli train pursuer --resume --steps 13000 --device cuda --zoo "$zoo" --name gpu -q
 python3 - "$zoo/gpu/pursuer/final.zip" <<'EOF'
 import json, sys
-meta = json.loads(open(sys.argv[1].replace(".zip", ".json")).read())
+from pathlib import Path
+meta = json.loads(Path(sys.argv[1]).with_suffix(".json").read_text())
 assert meta["steps"] >= 13000, meta["steps"]
 print("resumed on the GPU to", meta["steps"], "transitions")
 EOF
 step pecli play --pursuer "$zoo/gpu/pursuer/final.zip" --evader greedy -c quick --episodes 50 --seed 0
 step pecli export onnx "$zoo/gpu/pursuer/final.zip" --out "$zoo/gpu.onnx"
 step pecli selfplay -c quick --belief bimdn --rounds 1 --steps-per-round 3000 --device cuda --zoo "$zoo" --name sp -q
-python3 benchmarks/bench_train.py device --steps "${1:-8000}" 2>&1 | tee "$out/device.md"
+python3 benchmarks/bench_train.py device --steps "${1:-8000}" | tee "$out/device.md"
 echo PASS

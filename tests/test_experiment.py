@@ -58,7 +58,8 @@ def test_builtin_experiments() -> None:
     assert [(r.kind, r.seed, r.schedule) for r in small.runs()] == [
         (kind, seed, "league") for seed in (0, 1, 2) for kind in ("none", "bimdn")]
     league = small.runs()[0].scenario.training.selfplay
-    assert (league.opponents, league.league_exploiter_every, league.league_floor_split) == ("league", 0, "pfsp")
+    assert (league.opponents, league.league_exploiter_every, league.league_floor, league.league_floor_split) == (
+        "league", 0, 0.3, "pfsp")
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -34,8 +34,15 @@ from pecli.game.si import SILayout
 from pecli.policies import resolve_policy
 from pecli.policies.exported import ExportedPolicy
 from pecli.roles import Role, opponent_of
-from pecli.rl.belief import BeliefVecEnv
-from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, checkpoint_meta, make_env, make_model, with_overrides
+from pecli.rl.train import (
+    DEFAULT_OPPONENT,
+    TrainJob,
+    attach_belief,
+    checkpoint_meta,
+    make_env,
+    make_model,
+    with_overrides,
+)
 from pecli.runtime import Controller, ExportedModel, sidecar_path
 from pecli.scenario import Scenario
 from pecli.tournament import find_players, run_tournament, schedule
@@ -57,8 +64,7 @@ def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pu
     job = TrainJob(role=role, scenario=scenario, opponent=DEFAULT_OPPONENT[role], zoo=zoo, name=name)
     env = make_env(job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0)
     model = make_model(job, env, tensorboard=None)
-    if isinstance(env, BeliefVecEnv):
-        env.set_belief(model.policy.actor.features_extractor.belief)
+    attach_belief(job, env, model)  # the belief's features in the transitions; no fitting in a few steps
     model.learn(80)  # 50 transitions of warm-up, then a few updates
     return Run.create(zoo, name, scenario, {"command": "test"}).save(model, role, "final", checkpoint_meta(job, model, 0))
 

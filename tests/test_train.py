@@ -318,3 +318,22 @@ def test_the_finite_check_stops_training_before_later_callbacks_see_a_broken_act
     model = tiny_model(quick, learning_starts=10_000)  # a critic is checked when training ends, before any final save
     with pytest.raises(TrainingDiverged, match="parameter tensors of the policy"):
         model.learn(40, callback=CallbackList([Poison(20, "critic"), FiniteCheck()]))
+
+
+@pytest.mark.parametrize(("kind", "fits"), [("none", None), ("ukf", False), ("bimdn", True)])
+def test_attach_belief_gives_the_view_its_belief_and_a_fitter_to_a_learned_one(kind: str, fits: bool | None) -> None:
+    from pecli.rl.belief import BeliefVecEnv, FitBelief
+    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.scenario import load_scenario
+
+    scenario = with_overrides(load_scenario("quick"), {"belief": kind, "n_envs": 2})
+    job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="t")
+    env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
+    model = make_model(job, env, tensorboard=None)
+    fit = attach_belief(job, env, model)
+    if fits is None:
+        assert fit is None and not isinstance(env, BeliefVecEnv)
+        return
+    assert env.belief is model.policy.actor.features_extractor.belief
+    assert isinstance(fit, FitBelief) if fits else fit is None
+    assert env.reset()["belief"].shape[0] == 2  # the features go into every observation

@@ -32,7 +32,7 @@ from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
 from pecli.match import MAX_EPISODES
 from pecli.roles import Role
-from pecli.scenario import (  # noqa: F401 (the built-in experiments' names are this module's too)
+from pecli.scenario import (
     Scenario,
     builtin_experiment_dir,
     builtin_experiments,

@@ -76,20 +76,14 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     try:
         path = experiment_path(args.experiment)
         experiment_from_dict(read_yaml(path), str(path), base=path.parent)  # the file as written is valid
-    except ConfigError as error:
-        sys.exit(str(error))
-    data = read_yaml(path)
-    if args.config is not None:
-        data["scenario"] = args.config
-    given = {"kinds": args.beliefs, "seeds": args.seeds, "schedules": args.schedules, "cpu_hours": args.cpu_hours}
-    data["runs"].update({key: value for key, value in given.items() if value is not None})
-    if args.rounds is not None:
-        data["runs"]["rounds"] = args.rounds
-    if args.steps_per_round is not None:
-        data["runs"]["steps_per_round"] = args.steps_per_round
-    try:
+        data = read_yaml(path)
+        if args.config is not None:
+            data["scenario"] = args.config
+        given = {"kinds": args.beliefs, "seeds": args.seeds, "schedules": args.schedules, "cpu_hours": args.cpu_hours,
+                 "rounds": args.rounds, "steps_per_round": args.steps_per_round}
+        data["runs"].update({key: value for key, value in given.items() if value is not None})
         return experiment_from_dict(data, str(path), base=path.parent).runs()
-    except ConfigError as error:  # an option that the experiment's checks refuse (a belief kind, a budget)
+    except ConfigError as error:  # a bad file, or an option its checks refuse (a belief kind, a budget)
         sys.exit(str(error))
 
 

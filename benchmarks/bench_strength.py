@@ -36,6 +36,7 @@ out runs not there yet: every schedule compared at any equal budget, while the r
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import re
@@ -75,8 +76,8 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     beliefs, seeds, CPU budget and scenario given."""
     try:
         path = experiment_path(args.experiment)
-        experiment_from_dict(read_yaml(path), str(path), base=path.parent)  # the file as written is valid
         data = read_yaml(path)
+        experiment_from_dict(copy.deepcopy(data), str(path), base=path.parent)  # the file as written is valid
         if args.config is not None:
             data["scenario"] = args.config
         given = {"kinds": args.beliefs, "seeds": args.seeds, "schedules": args.schedules, "cpu_hours": args.cpu_hours,

@@ -57,7 +57,7 @@ TEST_EPISODES = 500
 
 def speed(args: argparse.Namespace) -> None:
     from pecli.policies import resolve_policy
-    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, make_learner, with_overrides
     from pecli.scenario import load_scenario
 
     base = load_scenario(args.config)
@@ -66,9 +66,7 @@ def speed(args: argparse.Namespace) -> None:
         for kind in args.kinds:
             scenario = with_overrides(base, {"belief": kind, "learning_starts": 1000, "belief_settings.warmup": 1000})
             job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench")
-            env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
-            model = make_model(job, env, tensorboard=None)
-            fit = attach_belief(job, env, model)
+            _, model, fit = make_learner(job, resolve_policy("greedy", "evader", scenario), seed=0)
             callbacks = [] if fit is None else [fit]
             model.learn(1000, callback=callbacks)  # warm-ups over: learning and fitting both run below
             start = time.perf_counter()

@@ -52,7 +52,7 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
 
     from pecli.policies import resolve_policy
     from pecli.rl.durable import DurableState, Ring, _write_chunk, replay_arrays
-    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, make_learner, with_overrides
     from pecli.scenario import load_scenario
 
     th.set_num_threads(1)
@@ -61,9 +61,7 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
         scenario = with_overrides(load_scenario("paper"), {"belief": belief})
         t = scenario.training
         job = TrainJob("pursuer", scenario, "greedy", Path("unused"), "bench")
-        env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
-        model = make_model(job, env, None)
-        fit = attach_belief(job, env, model)
+        _, model, fit = make_learner(job, resolve_policy("greedy", "evader", scenario), seed=0)
         rng = np.random.default_rng(0)
         buffer = model.replay_buffer
         for array in replay_arrays(buffer).values():  # a full buffer of plausible values

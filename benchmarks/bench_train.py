@@ -154,7 +154,7 @@ def device(args: argparse.Namespace) -> None:
     import torch as th
 
     from pecli.policies import resolve_policy
-    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, make_learner, with_overrides
     from pecli.scenario import load_scenario
 
     th.set_num_threads(1)
@@ -170,9 +170,7 @@ def device(args: argparse.Namespace) -> None:
         for name in devices:
             job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench",
                            device=name)
-            env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
-            model = make_model(job, env, tensorboard=None)
-            fit = attach_belief(job, env, model)
+            _, model, fit = make_learner(job, resolve_policy("greedy", "evader", scenario), seed=0)
             model.learn(warm, callback=fit)  # a filled buffer, the BiMDN past its warm-up, every kernel built
             if name.startswith("cuda"):
                 th.cuda.synchronize()

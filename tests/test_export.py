@@ -37,10 +37,8 @@ from pecli.roles import Role, opponent_of
 from pecli.rl.train import (
     DEFAULT_OPPONENT,
     TrainJob,
-    attach_belief,
     checkpoint_meta,
-    make_env,
-    make_model,
+    make_learner,
     with_overrides,
 )
 from pecli.runtime import Controller, ExportedModel, sidecar_path
@@ -62,9 +60,7 @@ def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pu
     scenario = with_overrides(scenario, {**TINY, "belief": belief, "n_envs": 4})
     name = f"{belief}-{role}"
     job = TrainJob(role=role, scenario=scenario, opponent=DEFAULT_OPPONENT[role], zoo=zoo, name=name)
-    env = make_env(job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0)
-    model = make_model(job, env, tensorboard=None)
-    attach_belief(job, env, model)  # the belief's features in the transitions; no fitting in a few steps
+    _, model, _ = make_learner(job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0)  # nothing to fit yet
     model.learn(80)  # 50 transitions of warm-up, then a few updates
     return Run.create(zoo, name, scenario, {"command": "test"}).save(model, role, "final", checkpoint_meta(job, model, 0))
 

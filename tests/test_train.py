@@ -321,16 +321,14 @@ def test_the_finite_check_stops_training_before_later_callbacks_see_a_broken_act
 
 
 @pytest.mark.parametrize(("kind", "fits"), [("none", None), ("ukf", False), ("bimdn", True)])
-def test_attach_belief_gives_the_view_its_belief_and_a_fitter_to_a_learned_one(kind: str, fits: bool | None) -> None:
+def test_make_learner_gives_the_view_its_belief_and_a_fitter_to_a_learned_one(kind: str, fits: bool | None) -> None:
     from pecli.rl.belief import BeliefVecEnv, FitBelief
-    from pecli.rl.train import TrainJob, attach_belief, make_env, make_model, with_overrides
+    from pecli.rl.train import TrainJob, make_learner, with_overrides
     from pecli.scenario import load_scenario
 
     scenario = with_overrides(load_scenario("quick"), {"belief": kind, "n_envs": 2})
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="t")
-    env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
-    model = make_model(job, env, tensorboard=None)
-    fit = attach_belief(job, env, model)
+    env, model, fit = make_learner(job, resolve_policy("greedy", "evader", scenario), seed=0)
     if fits is None:
         assert fit is None and not isinstance(env, BeliefVecEnv)
         return

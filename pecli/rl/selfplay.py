@@ -42,7 +42,6 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
-from pecli.rl.belief import FitBelief
 from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
@@ -56,7 +55,7 @@ from pecli.rl.callbacks import (
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
-from pecli.rl.train import TrainJob, attach_belief, checkpoint_meta, make_env, make_model, resume_seed
+from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings
@@ -198,15 +197,13 @@ class Learner:
         self.folder = role if kind == MAIN else f"{EXPLOITER}-{role}"  # where its checkpoints and state go
         self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
                                   seed=job.seed, device=job.device)
-        self.env = make_env(self.train_job, placeholder, job.seed, view=view)
+        self.env, self.model, self.fit = make_learner(self.train_job, placeholder, job.seed, run.path / "tb", view=view)
         t = job.scenario.training
-        self.model = make_model(self.train_job, self.env, run.path / "tb")
         self.callbacks: list[Any] = []
         self.curriculum: CurriculumCallback | None = None
         if t.curriculum.enabled:
             self.curriculum = CurriculumCallback(job.scenario, t.curriculum.span(state.curriculum_steps))
             self.callbacks.append(self.curriculum)
-        self.fit: FitBelief | None = attach_belief(self.train_job, self.env, self.model)
         if self.fit is not None:
             self.callbacks.append(self.fit)
         self.durable = DurableState(run.role_dir(self.folder) / RESUME_DIR)

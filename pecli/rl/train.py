@@ -201,6 +201,15 @@ def attach_belief(job: TrainJob, env: Any, model: Any) -> FitBelief | None:
     return FitBelief(belief, env.buffer, job.scenario.training.belief_settings, job.scenario.arena.half)
 
 
+def make_learner(job: TrainJob, opponent: Any, seed: int, tensorboard: Path | None = None,
+                 view: Any = None) -> tuple[Any, Any, FitBelief | None]:
+    """The learner's batched view (:func:`make_env`), its fresh model (:func:`make_model`) and the callback that
+    fits its belief (:func:`attach_belief`; ``None`` where nothing is fitted), built in the order they need."""
+    env = make_env(job, opponent, seed, view=view)
+    model = make_model(job, env, tensorboard)
+    return env, model, attach_belief(job, env, model)
+
+
 def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     """A function that plays the live model against ``opponent`` and returns the capture rate."""
     t = job.scenario.training
@@ -248,15 +257,14 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
     else:
         Run.check_new(job.zoo, job.name)
         run, durable, record = None, None, None
-    env = make_env(job, opponent, job.seed if record is None else resume_seed(job.seed, record.steps))
-    model = make_model(job, env, job.zoo / job.name / "tb")
+    env, model, fit = make_learner(job, opponent, job.seed if record is None else resume_seed(job.seed, record.steps),
+                                   job.zoo / job.name / "tb")
     if run is None:
         run = Run.create(job.zoo, job.name, job.scenario,
                          {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed})
         durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
     else:
         run.log_command()
-    fit = attach_belief(job, env, model)
     episodes, cpu_before = 0, 0.0
     if record is not None:
         durable.restore(record, model, fit)

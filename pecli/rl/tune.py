@@ -41,7 +41,7 @@ from pecli.policies.learned import LearnedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.callbacks import CurriculumCallback
 from pecli.rl.search_space import config_point, parse_space, suggest
-from pecli.rl.train import TrainJob, attach_belief, checkpoint_meta, make_env, make_model, with_overrides
+from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, with_overrides
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 
@@ -267,9 +267,7 @@ class Objective:
                        name=f"trial-{trial.number}", seed=seed, progress=False, device=self.device)
         t = scenario.training
         opponent = resolve_policy(job.opponent, opponent_of(role), scenario, seed=seed)
-        env = make_env(job, opponent, seed)
-        model = make_model(job, env, tensorboard=None)
-        fit = attach_belief(job, env, model)
+        env, model, fit = make_learner(job, opponent, seed)
         callbacks: list[BaseCallback] = [] if fit is None else [fit]
         if t.curriculum.enabled and role == "pursuer":
             curriculum = CurriculumCallback(scenario, t.curriculum.span(t.steps))

@@ -27,7 +27,8 @@ final evader against pure pursuit. It prints the issue's targets met or missed, 
 pooled over evaders and seeds, and per schedule that has both, the two-proportion z-test of ``bimdn``
 against ``none`` pursuers (same schedule, same CPU) over the evaders that every one of them met: a run never
 meets its own evader, and the two kinds' evaders differ in strength, so each kind's cross-play alone would
-not compare like with like. With
+not compare like with like. That test counts every episode as an independent sample; beside it, Welch's t-test
+over the runs' own rates takes the training seed as the unit (wider spread, the stricter test). With
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
@@ -40,17 +41,19 @@ import copy
 import json
 import os
 import re
+import signal
 import sys
 from pathlib import Path
 
 import yaml
+from scipy.stats import ttest_ind
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
-from pecli.errors import ConfigError  # noqa: E402
+from pecli.errors import ConfigError, PecliError  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
 from pecli.scenario import load_scenario, read_yaml  # noqa: E402
@@ -88,6 +91,10 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
         sys.exit(str(error))
 
 
+def _stop(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def train(args: argparse.Namespace) -> None:
     args.zoo.mkdir(parents=True, exist_ok=True)
     runs = strength_runs(args)
@@ -96,12 +103,15 @@ def train(args: argparse.Namespace) -> None:
         changed = changes(read_yaml(recorded), run.scenario.model_dump(mode="json")) if recorded.is_file() else []
         if changed:
             sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, or another --zoo")
+    signal.signal(signal.SIGTERM, _stop)  # `kill` (or a job's time limit) commits and stops like Ctrl-C
     for run in runs:
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
         try:
             outcome = execute_run(run, args.zoo, progress=True)
         except SelfPlayInterrupted as stop:
             sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
+        except KeyboardInterrupt:  # before its first round started: nothing of it to keep yet
+            sys.exit(f"{run.name}: stopped; run the same command to continue")
         print(f"{run.name}: {outcome['did']}, round {outcome['progress']['round']}, "
               f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
@@ -151,6 +161,23 @@ def pool(faced: Faced, runs: list[str], evaders: set[str] | None = None) -> tupl
     return sum(c for c, _ in rates), sum(n for _, n in rates)
 
 
+def seed_level(faced: Faced, bimdn: list[str], none: list[str], evaders: set[str]) -> str:
+    """Each run's capture rate over ``evaders`` and Welch's t-test of the ``bimdn`` runs' against the ``none`` ones'.
+
+    The z-test pools episodes as if each were independent; the runs' spread from one training seed to another is
+    wider than that, so this test, with a run as one sample, is the stricter one."""
+    rates = {}
+    for name in (*bimdn, *none):
+        captures, episodes = pool(faced, [name], evaders)
+        rates[name] = captures / episodes
+    listed = "; ".join(f"{kind} {', '.join(f'{rates[n]:.3f}' for n in names)}"
+                       for kind, names in (("bimdn", bimdn), ("none", none)))
+    if min(len(bimdn), len(none)) < 2:
+        return f"{listed} (a test needs 2 runs of each kind)"
+    p = ttest_ind([rates[n] for n in bimdn], [rates[n] for n in none], equal_var=False).pvalue
+    return f"{listed}; Welch t-test p = {p:.2g}"
+
+
 def print_cross_play(faced: Faced, runs: list[str]) -> None:
     """Each run's pursuer (rows) against each other run's evader (columns): where cross-play is lost."""
     print("\ncross-play: capture rate of each run's pursuer (row) against each other run's evader (column)\n")
@@ -163,9 +190,15 @@ def print_cross_play(faced: Faced, runs: list[str]) -> None:
 
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.cpu_hours, args.round)
-    scenario = load_scenario(args.config)
-    found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
+    try:
+        scenario = load_scenario(args.config)
+        found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
+    except PecliError as error:  # a scenario the runs did not train on, a damaged checkpoint
+        sys.exit(f"{error} (--config {args.config})")
     by_path = {Path(p.spec).resolve(): p for role in found for p in found[role]}
+    unplayable = sorted(str(p) for latest in runs.values() for p in latest.values() if p.resolve() not in by_path)
+    if unplayable:
+        sys.exit(f"{unplayable[0]} does not play scenario '{scenario.name}' (--config {args.config})")
     pursuers = {name: by_path[latest["pursuer"].resolve()] for name, latest in runs.items()}
     evaders = {name: by_path[latest["evader"].resolve()] for name, latest in runs.items()}
     scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
@@ -216,7 +249,9 @@ def report(args: argparse.Namespace) -> None:
         schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
         groups.setdefault((schedule, training["belief"]), []).append(name)
     print_cross_play(faced, list(runs))
-    print("\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, at equal CPU:")
+    budget = (f"at {args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"after round {args.round}"
+              if args.round is not None else "at each run's newest round (not an equal budget: give --cpu-hours)")
+    print(f"\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, {budget}:")
     for schedule in sorted({s for s, _ in groups}):
         kinds = {b: (pool(faced, names), len(names)) for (s, b), names in sorted(groups.items()) if s == schedule}
         c, n = (sum(t[i] for t, _ in kinds.values()) for i in (0, 1))
@@ -228,9 +263,13 @@ def report(args: argparse.Namespace) -> None:
         (cb, nb), (cn, nn) = pool(faced, bimdn, common), pool(faced, none, common)
         p = two_proportion_z_test(cb, nb, cn, nn)
         better = cb / nb > cn / nn and p < 0.05
+        hours = {kind: sum(cpu_hours_to(runs[name]["pursuer"]) for name in names) / len(names)
+                 for kind, names in (("bimdn", bimdn), ("none", none))}
         print(f"\n{schedule}: bimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} over the {len(common)} evaders every "
-              f"one of them met ({', '.join(sorted(common))}) and every seed: p = {p:.2g} "
+              f"one of them met ({', '.join(sorted(common))}) and every seed, at {hours['bimdn']:.2f} and "
+              f"{hours['none']:.2f} CPU-h on average: z-test p = {p:.2g} "
               f"({'met' if better else 'NOT met'}: bimdn must capture more, p < 0.05)")
+        print(f"  per run (the training seed as the unit): {seed_level(faced, bimdn, none, common)}")
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
 
 

@@ -120,3 +120,22 @@ def _policy(path: Path) -> list[th.Tensor]:
     from pecli.rl.checkpoint import read_weights
 
     return list(read_weights(path)[0]["policy"].values())
+
+
+def test_a_stop_while_committing_counts_the_rounds_cpu_once(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
+    ticks = iter(range(1, 1000))  # a CPU clock that advances one second per reading
+    monkeypatch.setattr(selfplay_module, "time", type("Clock", (), {"process_time": staticmethod(lambda: next(ticks))}))
+    original = selfplay_module.DurableState.save
+
+    def stopped_once(self, *args, **kwargs):  # Ctrl-C lands while the evader's state is being written
+        if self.directory.parent.name == "evader" and not getattr(stopped_once, "done", False):
+            stopped_once.done = True
+            raise KeyboardInterrupt
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(selfplay_module.DurableState, "save", stopped_once)
+    with pytest.raises(SelfPlayInterrupted):
+        SelfPlay(job(quick, tmp_path)).run()
+    spent = next(ticks) - 2  # the clock's last reading (by the commit after the stop) less its first (round start)
+    counted = sum(committed(tmp_path / "sim", role)[0]["extra"]["cpu_seconds"] for role in ("pursuer", "evader"))
+    assert counted == pytest.approx(spent)

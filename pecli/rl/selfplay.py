@@ -353,6 +353,7 @@ class SelfPlay:
             nonlocal cpu
             now = time.process_time()
             share = (now - cpu) / len(ROLES)  # the round's CPU, half to each learner
+            cpu = now  # counted once, even when a stop during the saves below commits again
             sources = {}
             for role in ROLES:
                 progress[role].update(cpu_seconds=progress[role]["cpu_seconds"] + share,
@@ -361,7 +362,6 @@ class SelfPlay:
                 run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + sum(p["cpu_seconds"] for p in progress.values())
                 learner = learners[role]
                 sources[role] = learner.durable.save(learner.model, learner.fit, episodes, run_cpu, extra=dict(progress[role]))
-            cpu = now
             return sources
 
         stats["pursuer"].listeners.append(every_episodes(t.checkpoint_every, stats["pursuer"].episodes,

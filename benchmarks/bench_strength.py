@@ -249,8 +249,11 @@ def report(args: argparse.Namespace) -> None:
         schedule = "league" if selfplay.get("opponents") == "league" else selfplay.get("schedule", "alternating")
         groups.setdefault((schedule, training["belief"]), []).append(name)
     print_cross_play(faced, list(runs))
-    budget = (f"at {args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"after round {args.round}"
-              if args.round is not None else "at each run's newest round (not an equal budget: give --cpu-hours)")
+    budget = "at each run's newest round (not an equal budget: give --cpu-hours)"
+    if args.cpu_hours is not None:
+        budget = f"at {args.cpu_hours} CPU-h"
+    elif args.round is not None:
+        budget = f"after round {args.round}"
     print(f"\npursuers pooled over every evader (heuristics, adversaries, cross-play) and seed, {budget}:")
     for schedule in sorted({s for s, _ in groups}):
         kinds = {b: (pool(faced, names), len(names)) for (s, b), names in sorted(groups.items()) if s == schedule}

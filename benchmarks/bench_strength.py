@@ -41,7 +41,6 @@ import copy
 import json
 import os
 import re
-import signal
 import sys
 from pathlib import Path
 
@@ -50,6 +49,7 @@ from scipy.stats import ttest_ind
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+from pecli.cli.common import sigterm_stops  # noqa: E402
 from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
@@ -91,10 +91,6 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
         sys.exit(str(error))
 
 
-def _stop(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def train(args: argparse.Namespace) -> None:
     args.zoo.mkdir(parents=True, exist_ok=True)
     runs = strength_runs(args)
@@ -103,11 +99,11 @@ def train(args: argparse.Namespace) -> None:
         changed = changes(read_yaml(recorded), run.scenario.model_dump(mode="json")) if recorded.is_file() else []
         if changed:
             sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, or another --zoo")
-    signal.signal(signal.SIGTERM, _stop)  # `kill` (or a job's time limit) commits and stops like Ctrl-C
     for run in runs:
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
         try:
-            outcome = execute_run(run, args.zoo, progress=True)
+            with sigterm_stops():  # `kill` (or a job's time limit) commits and stops like Ctrl-C
+                outcome = execute_run(run, args.zoo, progress=True)
         except SelfPlayInterrupted as stop:
             sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
         except KeyboardInterrupt:  # before its first round started: nothing of it to keep yet

@@ -141,6 +141,29 @@ def test_output_with_no_terminal_keeps_whole_table_rows(monkeypatch: pytest.Monk
     assert _width() is None
 
 
+def test_sigterm_stops_like_ctrl_c_inside_the_block_and_restores_the_handler_after() -> None:
+    """Every long command (train, selfplay, tune, tournament, experiment) saves and says how to resume on
+    Ctrl-C; ``sigterm_stops`` gives ``kill`` that path, and only for as long as the command runs."""
+    import signal
+
+    from pecli.cli.common import sigterm_stops
+
+    def before(signum: int, frame: object) -> None:
+        raise AssertionError("the old handler ran inside the block")
+
+    previous = signal.signal(signal.SIGTERM, before)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with sigterm_stops():
+                os.kill(os.getpid(), signal.SIGTERM)
+        assert signal.getsignal(signal.SIGTERM) is before  # also when the block ended by the interrupt
+        with sigterm_stops():
+            pass
+        assert signal.getsignal(signal.SIGTERM) is before
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> None:
     """Typer's rich help keeps a docstring's line breaks: every command's text is reflowed into paragraphs."""
     from pecli.cli.app import reflow

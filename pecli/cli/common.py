@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import functools
 import os
+import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 import typer
 from rich.console import Console
@@ -108,6 +110,25 @@ def one_torch_thread() -> None:
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(1)
+
+
+def interrupt(signum: int, frame: object) -> NoReturn:
+    """A signal handler that stops the program like Ctrl-C does: by raising :class:`KeyboardInterrupt`."""
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def sigterm_stops() -> Iterator[None]:
+    """Inside the block, SIGTERM (``kill``, a scheduler, a job's time limit) stops like Ctrl-C.
+
+    Long commands catch :class:`KeyboardInterrupt` to save their finished work and say how to resume; this gives
+    ``kill`` the same path. The handler that was there before comes back when the block ends.
+    """
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def require_positive(value: int, name: str) -> int:

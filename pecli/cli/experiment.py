@@ -13,7 +13,7 @@ import typer
 from rich.live import Live
 from rich.table import Table
 
-from pecli.cli.common import console, err_console, user_errors
+from pecli.cli.common import console, err_console, interrupt, sigterm_stops, user_errors
 from pecli.locks import locked
 from pecli.scenario import builtin_experiments
 
@@ -128,23 +128,19 @@ def run(
             err_console.print(f"{loaded.name}: {stage.split(' ')[0]}", highlight=False)
         last_stage = stage.split(" ")[0]
 
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
-
-    previous = signal.getsignal(signal.SIGTERM)
     runner = ExperimentRunner(loaded, out, on_update=update, until_cpu_hours=until_cpu_hours)
     again = f"pecli experiment run {experiment} --out {out}" + (f" --address {address}" if address else "")
     cluster = RayCluster(address=address, cpus=cpus)  # refuses bad --cpus/--address before anything is written
     out.mkdir(parents=True, exist_ok=True)
     stack = ExitStack()
     stack.enter_context(locked(out, "experiment output"))  # one driver per --out, however the other one started
-    stack.callback(signal.signal, signal.SIGTERM, previous)
+    stack.enter_context(sigterm_stops())  # SIGTERM stops like Ctrl-C; the handler before comes back at the end
     try:
         runner.prepare()  # refuses another experiment's --out before Ray starts
         if live is not None:
             live.start()
         with cluster:
-            signal.signal(signal.SIGTERM, interrupt)  # after ray.init, which installs a handler of its own
+            signal.signal(signal.SIGTERM, interrupt)  # again: ray.init installed a handler of its own
             where = (f"embedded Ray, {cluster.total_cpus()} CPUs" if cluster.embedded else
                      f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs")
             err_console.print(f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; "

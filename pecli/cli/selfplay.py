@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import enum
-import signal
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
+from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
 from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
 from pecli.errors import PecliError
 from pecli.scenario import load_scenario
@@ -118,23 +117,18 @@ def selfplay(
         device=device,
     )
 
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
-        loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
-        err_console.print(
-            f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side "
-            f"on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
-            + f", belief {scenario.training.belief}", highlight=False)
-        final = loop.run()
+        with sigterm_stops():
+            loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
+            err_console.print(
+                f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side "
+                f"on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
+                + f", belief {scenario.training.belief}", highlight=False)
+            final = loop.run()
     except SelfPlayInterrupted as stop:
         err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     for role, path in final.items():
         err_console.print(f"[green]done[/]: {role} {path}", highlight=False)
 

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from pecli.cli.common import console, err_console, one_torch_thread, require_batch, require_positive, scenario_for, user_errors
+from pecli.cli.common import console, err_console, one_torch_thread, require_batch, require_positive, scenario_for, sigterm_stops, user_errors
 from pecli.errors import PecliError
 
 
@@ -65,13 +64,9 @@ def tournament(
     if not paths and not baselines:
         raise PecliError("nothing to play: give zoo folders or checkpoints, and/or --baselines")
 
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt  # SIGTERM (a scheduler, a time limit) stops like Ctrl-C: workers end too
-
     out.mkdir(parents=True, exist_ok=True)
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        with locked(out, "tournament output"):
+    try:  # SIGTERM (a scheduler, a time limit) stops like Ctrl-C: workers end too
+        with sigterm_stops(), locked(out, "tournament output"):
             cache = out / "pairings"
             if cache.is_dir() and any(cache.iterdir()) and not resume:
                 raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, "
@@ -116,5 +111,3 @@ def tournament(
         err_console.print(f"[yellow]interrupted[/]: the finished pairings are cached in {out}; continue with --resume",
                           highlight=False)
         raise typer.Exit(code=130) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import enum
-import signal
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, user_errors
+from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import PecliError
 from pecli.scenario import ALGOS, load_scenario
@@ -126,16 +125,11 @@ def train(
         err_console.print(f"run [bold]{run.path}[/]: {role_name} vs {job.opponent} on {scenario.name}, "
                           f"{scenario.training.steps:,} steps", highlight=False)
 
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt  # SIGTERM (a scheduler, a benchmark's time limit) saves like Ctrl-C
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
-        final = run_training(job, on_start=started, report=lambda line: err_console.print(line, highlight=False))
+        with sigterm_stops():  # a scheduler's or a benchmark's time limit saves like Ctrl-C
+            final = run_training(job, on_start=started, report=lambda line: err_console.print(line, highlight=False))
     except TrainingInterrupted as stop:
         err_console.print(f"[yellow]interrupted[/]: saved {stop.checkpoint}; "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     err_console.print(f"[green]done[/]: {final}", highlight=False)

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import enum
-import signal
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from pecli.cli.common import TrainConfigOption, console, err_console, user_errors
+from pecli.cli.common import TrainConfigOption, console, err_console, sigterm_stops, user_errors
 from pecli.cli.train import AlgoChoice, DeviceOption
 from pecli.errors import PecliError
 
@@ -93,19 +92,14 @@ def _tune(what: str, **options: Any) -> None:
     worker = Worker(storage, study.study_name, total, folder, o["device"], settings.seed,
                     report=lambda line: err_console.print(line, highlight=False, markup=False))
 
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
-        run_workers(worker, o["jobs"])
+        with sigterm_stops():
+            run_workers(worker, o["jobs"])
     except KeyboardInterrupt:
         err_console.print(f"[yellow]interrupted[/]: finished trials are stored; continue with "
                           f"--resume --study {study.study_name}" + (f" --storage {storage}" if o["storage"] else ""),
                           highlight=False)
         raise typer.Exit(code=130) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     written = write_report(study, folder)
     err_console.print(f"[green]done[/]: report {written[0]}", highlight=False)
 

@@ -4,6 +4,7 @@
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
+    python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
 schedules`` or ``strength-small`` for those, or an experiment file of your own), its grid and budget replaced by
@@ -22,7 +23,7 @@ CPU budget, then the same report::
 
 ``report`` takes each run's newest main checkpoints and plays (``pecli.tournament``, cached in
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
-(circler, blindside, wall-runner) and against every other run's final evader (cross-play); every
+(circler, blindside, wall-runner, hider) and against every other run's final evader (cross-play); every
 final evader against pure pursuit. It prints the issue's targets met or missed, each schedule's pursuers
 pooled over evaders and seeds, and per schedule that has both, the two-proportion z-test of ``bimdn``
 against ``none`` pursuers (same schedule, same CPU) over the evaders that every one of them met: a run never
@@ -32,6 +33,9 @@ over the runs' own rates takes the training seed as the unit (wider spread, the 
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
+
+``behaviour`` is a diagnostic, not a target: how evaders play against one pursuer (caught, seen, how fast they
+move while they see it and while they do not, how far they keep), to tell a lost search from a lost chase.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
 import yaml
 from scipy.stats import ttest_ind
 
@@ -54,6 +59,8 @@ from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
+from pecli.match import Recording, play_match  # noqa: E402
+from pecli.policies import resolve_policy  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
 from pecli.scenario import load_scenario, read_yaml  # noqa: E402
@@ -61,7 +68,7 @@ from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
-ADVERSARIES = ("circler", "blindside", "wall-runner")
+ADVERSARIES = ("circler", "blindside", "wall-runner", "hider")
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league)-s\d+")  # <belief>-<schedule>-s<seed>
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
 
@@ -272,12 +279,56 @@ def report(args: argparse.Namespace) -> None:
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
 
 
+def movement(recording: Recording) -> dict[str, float]:
+    """What the evader of ``recording`` did, averaged over the steps its games lasted: how it was caught,
+    seen and saw, how fast it moved (m/step) while it saw the pursuer and while it did not, how far it kept."""
+    evader, pursuer = recording.evader[..., :2], recording.pursuer[..., :2]
+    alive = np.arange(len(evader))[:, None] < recording.steps[None, :]  # (T1, r): the steps each game ran
+    moved = alive[1:]
+    speed = np.linalg.norm(np.diff(evader, axis=0), axis=2)
+    sees = recording.seen_by_evader[1:]
+    wall = np.min(np.asarray(recording.scenario.arena.half) - np.abs(evader), axis=2)
+    return {"caught": recording.captured.mean(), "seen": recording.seen_by_pursuer[alive].mean(),
+            "sees": recording.seen_by_evader[alive].mean(), "speed unseen": speed[moved & ~sees].mean(),
+            "speed seeing": speed[moved & sees].mean(),
+            "distance": np.linalg.norm(evader - pursuer, axis=2)[alive].mean(), "wall": wall[alive].mean()}
+
+
+def behaviour(args: argparse.Namespace) -> None:
+    """How each evader plays against one pursuer (is it caught by a failed search or a lost chase?)."""
+    scenario = load_scenario(args.config)
+    try:  # every player loads before the first game: a wrong name ends in one line
+        resolve_policy(args.pursuer, "pursuer", scenario)
+        for name in args.evaders:
+            resolve_policy(name, "evader", scenario)
+    except PecliError as error:
+        sys.exit(str(error))
+    print(f"against {args.pursuer} on {scenario.name}, {args.episodes} games each (means over the steps they lasted)\n")
+    print("| evader | caught | seen by the pursuer | sees the pursuer | speed unseen / seeing it (m/step) | distance "
+          "| to the nearest wall |\n| --- | ---: | ---: | ---: | --- | ---: | ---: |")
+    for name in args.evaders:
+        pursuer = resolve_policy(args.pursuer, "pursuer", scenario, seed=1)
+        evader = resolve_policy(name, "evader", scenario, seed=2)
+        torch = sys.modules.get("torch")
+        if torch is not None:
+            torch.set_num_threads(1)
+        _, recording = play_match(scenario, pursuer, evader, args.episodes, seed=0, record=args.episodes)
+        m = movement(recording)
+        print(f"| {name} | {m['caught']:.2f} | {m['seen']:.2f} | {m['sees']:.2f} | {m['speed unseen']:.3f} / "
+              f"{m['speed seeing']:.3f} | {m['distance']:.1f} m | {m['wall']:.2f} m |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True)
     for name in ("train", "report"):
         command = sub.add_parser(name)
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    moves = sub.add_parser("behaviour")
+    moves.add_argument("--pursuer", required=True, help="a checkpoint or built-in pursuer")
+    moves.add_argument("--evaders", nargs="+", required=True, help="checkpoints or built-in evaders")
+    moves.add_argument("--config", default="tuned", help="the scenario they play")
+    moves.add_argument("--episodes", type=int, default=200)
     sub.choices["train"].add_argument("--config", default=None, help="the scenario (default: the experiment's)")
     sub.choices["report"].add_argument("--config", default="tuned", help="the scenario the players play")
     sub.choices["train"].add_argument("--experiment", default="strength",
@@ -302,7 +353,7 @@ def main() -> None:
     at.add_argument("--round", type=int, default=None,
                     help="compare every run after this many rounds (equal transitions per main learner, not CPU)")
     args = parser.parse_args()
-    train(args) if args.what == "train" else report(args)
+    {"train": train, "report": report, "behaviour": behaviour}[args.what](args)
 
 
 if __name__ == "__main__":

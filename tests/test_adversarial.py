@@ -11,7 +11,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.adversarial import Interceptor, WallRunner
 from pecli.scenario import Scenario
 
-EVADERS = ["circler", "blindside", "wall-runner"]
+EVADERS = ["circler", "blindside", "wall-runner", "hider"]
 
 
 @pytest.mark.parametrize("scenario", all_scenarios(), ids=lambda s: f"{s.name}-{s.observation_frame}")
@@ -77,6 +77,27 @@ def test_the_wall_runner_runs_along_the_wall_away_from_the_pursuer(paper: Scenar
     assert action[1] > 0.5 and abs(action[0]) < 0.5  # up the wall, away from it
     arc = WallRunner._arc(np.array([[hx, 0.0], [0.0, 7.7], [-7.7, 0.0]]), hx, 7.7)
     assert np.allclose(WallRunner._point(arc, hx, 7.7), [[hx, 0.0], [0.0, 7.7], [-7.7, 0.0]])
+
+
+def test_the_hider_goes_far_behind_the_car_remembers_its_spot_and_keeps_still(paper: Scenario) -> None:
+    car = (0.0, 0.0, 0.0, 2.0, 0.0)  # at the centre, heading +x
+    hider = resolve_policy("hider", "evader", paper, seed=0)
+    hider.reset(1)
+    unseen = car_and_mass(paper, car, (-7.0, -7.0, 0.0, 0.0))  # 9.9 m away: out of the hider's sensor range
+    assert np.allclose(hider.act(unseen["evader"]), 0.0)  # never seen it: keeps still
+    behind = car_and_mass(paper, car, (-4.0, 1.0, 0.0, 0.0))  # seen, behind the car
+    action = hider.act(behind["evader"])[0]
+    spot = hider.spot[0].copy()
+    assert spot[0] < -5.0 and np.linalg.norm(spot) > 8.0  # far, on the car's blind side
+    towards = spot - np.array([-4.0, 1.0])
+    assert np.dot(action, towards) / (np.linalg.norm(action) * np.linalg.norm(towards)) > 0.9
+    gone = car_and_mass(paper, (7.0, -7.0, 0.0, 2.0, 0.0), (-4.0, 1.0, 0.0, 0.0))  # the car out of its sight now
+    action = hider.act(gone["evader"])[0]
+    assert np.allclose(hider.spot[0], spot) and np.dot(action, towards) > 0  # still on its way to the same spot
+    there = car_and_mass(paper, (7.0, -7.0, 0.0, 2.0, 0.0), (*spot, 0.0, 0.0))
+    assert np.allclose(hider.act(there["evader"]), 0.0)  # at its spot: keeps still
+    close = car_and_mass(paper, car, (1.5, 0.0, 0.0, 0.0))  # within 2 m: flees like greedy
+    assert np.allclose(hider.act(close["evader"]), acceleration("greedy", paper, close))
 
 
 def test_the_interceptor_leads_a_moving_evader(paper: Scenario) -> None:

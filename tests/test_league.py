@@ -73,7 +73,7 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
     turns, pools = state(run)["turns"], state(run)["pools"]
     assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
         (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter") for role in ("pursuer", "evader")]
-    assert {"circler", "blindside", "wall-runner"} <= {e["name"] for e in pools["evader"]["entries"]}
+    assert {"circler", "blindside", "wall-runner", "hider"} <= {e["name"] for e in pools["evader"]["entries"]}
     assert "interceptor" in {e["name"] for e in pools["pursuer"]["entries"]}
     for t in (t for t in turns if t["learner"] == "exploiter"):
         meta = read_metadata(run / t["checkpoint"])
@@ -105,7 +105,7 @@ def test_the_exploiters_train_every_kth_round_or_never(quick: Scenario, tmp_path
         (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter")[:1 + (r in exploited)]
         for role in ("pursuer", "evader")]
     assert (run / "exploiter-pursuer").is_dir() == bool(exploited)
-    assert {"circler", "blindside", "wall-runner"} <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
+    assert {"circler", "blindside", "wall-runner", "hider"} <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
 
 
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:

@@ -13,12 +13,17 @@ paper's; they are opponents in training and rows in the benchmarks (docs/adversa
 * ``wall-runner`` (evader): a car that touches a wall stops dead, and corners force it to slow down and
   turn. The wall-runner runs to the wall and, while the pursuer is near, runs around the arena along
   the walls, away from it.
+* ``hider`` (evader): the car sees only a wedge ahead and must find what it cannot see. Whenever it
+  sees the pursuer, the hider picks a hiding spot (of a grid 1 m inside the walls) far from the
+  pursuer and behind its heading, reached by a path that stays out of the pursuer's sight, goes there
+  and keeps still; a pursuer within 2 m makes it flee like greedy.
 * ``interceptor`` (pursuer): aims where the evader will be (lead pursuit on the evader's seen
   velocity), goes to where a lost evader should be by now, and otherwise sweeps the arena along a
   fixed tour instead of walking randomly.
 
 Against a point-mass pursuer (no turning circle, no blind side) the circler and the blindside flee
-like the greedy evader. Every player reads only its own observation, like every other policy.
+like the greedy evader; the hider still hides (a point mass's sensor is a disk, so "behind it" is no
+better than elsewhere). Every player reads only its own observation, like every other policy.
 """
 
 from __future__ import annotations
@@ -183,6 +188,57 @@ class WallRunner(_Evader):
                       -hx + (s - left))
         y = np.select([s < right, s < top, s < left], [-hy + s, np.full_like(s, hy), hy - (s - top)], np.full_like(s, -hy))
         return np.stack([x, y], axis=1)
+
+
+class Hider(_Evader):
+    """Hides from the pursuer: far from it, behind it, out of its sight, and still (see the module)."""
+
+    name = "hider"
+    margin = 1.0  # m from the walls of the hiding spots
+    grid = 5  # hiding spots per side: a 5 x 5 grid
+    danger = 2.0  # m: a seen pursuer nearer than this makes it flee like greedy
+    clearance = 3.0  # m: its path to a spot keeps at least this far from the pursuer
+    behind_weight = 3.0  # m of distance a spot right behind the pursuer is worth
+    path_points = 8  # points of the straight path to a spot that are checked against the pursuer's sight
+
+    def _allocate(self, n: int) -> None:
+        super()._allocate(n)
+        hx, hy = (h - self.margin for h in self.scenario.arena.half)
+        xs, ys = np.meshgrid(np.linspace(-hx, hx, self.grid), np.linspace(-hy, hy, self.grid))
+        self.spots = np.stack([xs.ravel(), ys.ravel()], axis=1)  # (k, 2)
+        self.spot = np.full((n, 2), np.nan)  # the hiding spot it goes to, per game; NaN: none yet, keep still
+
+    def _restart(self, mask: np.ndarray) -> None:
+        super()._restart(mask)
+        self.spot[mask] = np.nan
+
+    def _act(self, view: Decoded) -> np.ndarray:
+        heading = self._pursuer_heading(view)
+        seen = view.seen
+        if seen.any():
+            self.spot[seen] = self._choose(view.own_pos[seen], view.opp_pos[seen], heading[seen])
+        target = np.where(np.isnan(self.spot), view.own_pos, self.spot)
+        actions = self._go(view, target)
+        near = seen & (np.linalg.norm(view.own_pos - view.opp_pos, axis=1) < self.danger)
+        actions[near] = self._run(view, self._flee(view))[near]
+        return actions
+
+    def _choose(self, own: np.ndarray, pursuer: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """The best hiding spot ``(m, 2)`` for ``m`` games: far from the pursuer, behind its ``heading`` (zero:
+        unknown), and reached by a path the pursuer does not see (it is taken to stay where it is)."""
+        rel = self.spots[None] - pursuer[:, None]  # (m, k, 2)
+        distance = np.linalg.norm(rel, axis=2)
+        ahead = np.einsum("mj,mkj->mk", heading, rel) / np.maximum(distance, 1e-9)  # cos bearing; 0 if unknown
+        fractions = np.linspace(1.0 / self.path_points, 1.0, self.path_points)
+        path = own[:, None, None] + fractions[None, None, :, None] * (self.spots[None, :, None] - own[:, None, None])
+        offset = path - pursuer[:, None, None]  # (m, k, points, 2)
+        gap = np.linalg.norm(offset, axis=3)
+        sensor = self.scenario.pursuer.sensor
+        known = np.any(heading != 0.0, axis=1)[:, None, None]
+        in_wedge = np.einsum("mj,mkpj->mkp", heading, offset) >= np.cos(0.5 * sensor.fov) * gap
+        sighted = (gap <= sensor.range) & (in_wedge | ~known) | (gap < self.clearance)
+        score = distance + self.behind_weight * (1.0 - ahead) - 10.0 * sensor.range * sighted.mean(axis=2)
+        return self.spots[np.argmax(score, axis=1)]
 
 
 class Interceptor(HeuristicPolicy):

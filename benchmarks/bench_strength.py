@@ -4,7 +4,7 @@
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
-    python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200]
+    python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
 schedules`` or ``strength-small`` for those, or an experiment file of your own), its grid and budget replaced by
@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import re
@@ -306,6 +307,7 @@ def behaviour(args: argparse.Namespace) -> None:
     print(f"against {args.pursuer} on {scenario.name}, {args.episodes} games each (means over the steps they lasted)\n")
     print("| evader | caught | seen by the pursuer | sees the pursuer | speed unseen / seeing it (m/step) | distance "
           "| to the nearest wall |\n| --- | ---: | ---: | ---: | --- | ---: | ---: |")
+    drawn: list[Path] = []
     for name in args.evaders:
         pursuer = resolve_policy(args.pursuer, "pursuer", scenario, seed=1)
         evader = resolve_policy(name, "evader", scenario, seed=2)
@@ -316,6 +318,25 @@ def behaviour(args: argparse.Namespace) -> None:
         m = movement(recording)
         print(f"| {name} | {m['caught']:.2f} | {m['seen']:.2f} | {m['sees']:.2f} | {m['speed unseen']:.3f} / "
               f"{m['speed seeing']:.3f} | {m['distance']:.1f} m | {m['wall']:.2f} m |", flush=True)
+        if args.render is not None:
+            path = args.render if len(args.evaders) == 1 else args.render.with_stem(f"{args.render.stem}-{len(drawn)}")
+            drawn.append(draw_escapes(recording, path))
+    if drawn:
+        print("\ndrew the games each evader escaped: " + ", ".join(str(path) for path in drawn))
+
+
+def draw_escapes(recording: Recording, path: Path) -> Path:
+    """Draw up to 4 games of ``recording`` that the evader escaped (the first games if it escaped none)."""
+    from pecli.game.render import draw_episodes
+
+    escaped = np.flatnonzero(~recording.captured)
+    games = (escaped if len(escaped) else np.arange(len(recording.captured)))[:4]
+    picked = dataclasses.replace(
+        recording, pursuer=recording.pursuer[:, games], evader=recording.evader[:, games],
+        seen_by_pursuer=recording.seen_by_pursuer[:, games], seen_by_evader=recording.seen_by_evader[:, games],
+        steps=recording.steps[games], captured=recording.captured[games],
+        beliefs={role: tuple(part[:, games] for part in parts) for role, parts in recording.beliefs.items()})
+    return draw_episodes(picked, path)
 
 
 def main() -> None:
@@ -329,6 +350,8 @@ def main() -> None:
     moves.add_argument("--evaders", nargs="+", required=True, help="checkpoints or built-in evaders")
     moves.add_argument("--config", default="tuned", help="the scenario they play")
     moves.add_argument("--episodes", type=int, default=200)
+    moves.add_argument("--render", type=Path, default=None,
+                       help="draw 4 games each evader escaped to this .png (with -N before the suffix for several)")
     sub.choices["train"].add_argument("--config", default=None, help="the scenario (default: the experiment's)")
     sub.choices["report"].add_argument("--config", default="tuned", help="the scenario the players play")
     sub.choices["train"].add_argument("--experiment", default="strength",

@@ -4,6 +4,7 @@
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
+    python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
@@ -34,6 +35,11 @@ over the runs' own rates takes the training seed as the unit (wider spread, the 
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
 
+``exploit`` measures how exploitable each run's final pursuer (``--role evader``: evader) is, which no target of
+the issue asks but cross-play hints at: a fresh ``none`` learner of the other side trains against it alone (TD3,
+no curriculum, ``--steps`` transitions, in ``<zoo>/exploit``, resumable) and plays it 500 games; results are cached
+in ``<zoo>/exploit/results.json``. A robust pursuer keeps its capture rate against its own best response.
+
 ``behaviour`` is a diagnostic, not a target: how evaders play against one pursuer (caught, seen, how fast they
 move while they see it and while they do not, how far they keep), to tell a lost search from a lost chase.
 """
@@ -60,10 +66,12 @@ from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
+from pecli.io import atomic_write_json  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
+from pecli.roles import opponent_of  # noqa: E402
 from pecli.scenario import load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
@@ -339,12 +347,66 @@ def draw_escapes(recording: Recording, path: Path) -> Path:
     return draw_episodes(picked, path)
 
 
+def exploit(args: argparse.Namespace) -> None:
+    """How exploitable each run's final player of ``--role`` is: a fresh ``none`` learner of the other side trained
+    against it alone for ``--steps`` transitions (an approximate best response), then ``--episodes`` games."""
+    from pecli.rl.train import TrainingInterrupted, TrainJob, train as run_training, with_overrides
+
+    runs = final_players(args.zoo, args.cpu_hours, args.round)
+    try:
+        scenario = load_scenario(args.config)
+        training = with_overrides(scenario, {"steps": args.steps, "belief": "none", "curriculum.enabled": False})
+    except PecliError as error:
+        sys.exit(str(error))
+    learner = opponent_of(args.role)
+    folder = args.zoo / "exploit"
+    cache = folder / "results.json"
+    results = json.loads(cache.read_text()) if cache.is_file() else {}
+    print(f"each run's {args.role} against {'an' if learner == 'evader' else 'a'} {learner} trained on it alone ({args.steps:,} transitions, TD3, no "
+          f"belief, no curriculum), {args.episodes} games\n")
+    print(f"| run | {args.role} | capture rate | the {learner}'s training CPU-min |\n| --- | --- | ---: | ---: |")
+    for name, players in runs.items():
+        target = players[args.role]
+        job_name = f"{name}-{target.stem}-{learner}-{args.steps}-s{args.seed}"
+        if job_name not in results:
+            final = folder / job_name / learner / "final.zip"
+            if not final.is_file():
+                job = TrainJob(role=learner, scenario=training, opponent=str(target), zoo=folder, name=job_name,
+                               seed=args.seed, resume=(folder / job_name).is_dir(), progress=False)
+                try:
+                    with sigterm_stops():
+                        run_training(job)
+                except TrainingInterrupted:
+                    sys.exit(f"{job_name}: stopped; its state is kept: run the same command to continue")
+            meta = json.loads(final.with_suffix(".json").read_text())
+            players_of = {args.role: str(target), learner: str(final)}
+            pursuer = resolve_policy(players_of["pursuer"], "pursuer", scenario, seed=1)
+            evader = resolve_policy(players_of["evader"], "evader", scenario, seed=2)
+            match, _ = play_match(scenario, pursuer, evader, args.episodes, seed=0)
+            results[job_name] = {"captures": int(match.captured.sum()), "episodes": args.episodes,
+                                 "cpu_seconds": meta["cpu_seconds"]}
+            atomic_write_json(cache, results)
+        done = results[job_name]
+        print(f"| {name} | {target.stem} | {done['captures'] / done['episodes']:.2f} | "
+              f"{done['cpu_seconds'] / 60:.1f} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True)
     for name in ("train", "report"):
         command = sub.add_parser(name)
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    probe = sub.add_parser("exploit")
+    probe.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
+    probe.add_argument("--role", choices=["pursuer", "evader"], default="pursuer", help="whose exploitability")
+    probe.add_argument("--steps", type=int, default=200_000, help="transitions the exploiting learner trains")
+    probe.add_argument("--episodes", type=int, default=500)
+    probe.add_argument("--seed", type=int, default=0, help="the exploiting learner's seed")
+    probe.add_argument("--config", default="tuned", help="the scenario they play")
+    probe_at = probe.add_mutually_exclusive_group()
+    probe_at.add_argument("--cpu-hours", type=float, default=None, help="each run's players at this CPU budget")
+    probe_at.add_argument("--round", type=int, default=None, help="each run's players after this many rounds")
     moves = sub.add_parser("behaviour")
     moves.add_argument("--pursuer", required=True, help="a checkpoint or built-in pursuer")
     moves.add_argument("--evaders", nargs="+", required=True, help="checkpoints or built-in evaders")
@@ -376,7 +438,7 @@ def main() -> None:
     at.add_argument("--round", type=int, default=None,
                     help="compare every run after this many rounds (equal transitions per main learner, not CPU)")
     args = parser.parse_args()
-    {"train": train, "report": report, "behaviour": behaviour}[args.what](args)
+    {"train": train, "report": report, "exploit": exploit, "behaviour": behaviour}[args.what](args)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic.functional_validators import BeforeValidator
 
 from pecli.errors import ConfigError
+from pecli.roles import Role
 
 TWO_PI = 2.0 * math.pi
 _ANGLE = re.compile(r"^\s*(?:(?P<k>[0-9]*\.?[0-9]+)\s*\*?\s*)?pi\s*(?:/\s*(?P<d>[0-9]*\.?[0-9]+))?\s*$")
@@ -254,6 +255,16 @@ class SelfPlay(_Model):
         default=1, ge=0, le=100_000,
         description="(ours) league: the exploiters train in every k-th round (1: every round, as AlphaStar's; 0: "
         "never, the main agents' pools keep only the scripted players and their own checkpoints)",
+    )
+    league_exploiter_roles: list[Role] = Field(
+        default=["pursuer", "evader"], min_length=1,
+        description="(ours) league: the sides that have an exploiter (an evader exploiter finds the main pursuer's "
+        "holes, a pursuer exploiter the main evader's)",
+    )
+    league_exploiter_after: Real = Field(
+        default=0.0, ge=0, le=100_000,
+        description="(ours) league: CPU-hours the run spends before its exploiters train (a run of hours can leave "
+        "its first hours to the main agents and call the exploiters in once what is left to find are holes)",
     )
     exploiter_join: Real = Field(
         default=0.5, gt=0, le=1,

@@ -41,7 +41,8 @@ def test_builtin_experiments() -> None:
     from pecli.rl.selfplay import STATE_FILE
 
     assert SELFPLAY_STATE == STATE_FILE
-    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small"} <= set(
+    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
+            "strength-exploiters"} <= set(
         builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -60,6 +61,8 @@ def test_builtin_experiments() -> None:
     league = small.runs()[0].scenario.training.selfplay
     assert (league.opponents, league.league_exploiter_every, league.league_floor, league.league_floor_split) == (
         "league", 0, 0.3, "pfsp")
+    late = load_experiment("strength-exploiters").runs()[0].scenario.training.selfplay  # its exploiter after 2 CPU-h
+    assert (late.league_exploiter_every, late.league_exploiter_after, late.league_exploiter_roles) == (1, 2.0, ["evader"])
 
 
 @pytest.mark.parametrize(("change", "message"), [

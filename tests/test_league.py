@@ -94,30 +94,39 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
         "pursuer_0", "evader_0", *(f"exploiter-{role}/r00{r}_0" for role in ("pursuer", "evader") for r in (1, 2))}
 
 
-@pytest.mark.parametrize("every, exploited", [(2, (2,)), (0, ())])
-def test_the_exploiters_train_every_kth_round_or_never(quick: Scenario, tmp_path: Path, every: int,
-                                                        exploited: tuple[int, ...]) -> None:
-    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_every": every})
-    SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None).run()
+@pytest.mark.parametrize("every, after, roles, exploited", [
+    (2, 0, ["pursuer", "evader"], (2,)), (0, 0, ["pursuer", "evader"], ()), (1, 1e-6, ["pursuer", "evader"], (2,)),
+    (1, 100, ["pursuer", "evader"], ()), (1, 0, ["evader"], (1, 2))])
+def test_the_exploiters_train_every_kth_round_once_the_run_spent_its_cpu_or_never(
+        quick: Scenario, tmp_path: Path, every: int, after: float, roles: list[str], exploited: tuple[int, ...]) -> None:
+    """``after`` CPU-hours: 1e-6 (3.6 ms) is spent by round 1's turns, so round 2 has exploiters; 100 never is.
+    ``roles``: the sides that have an exploiter. An exploiter plays the real game: no curriculum."""
+    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_every": every,
+                                    "selfplay.league_exploiter_after": after, "selfplay.league_exploiter_roles": roles})
+    loop = SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None)
+    loop.run()
     run = tmp_path / "lg"
     turns, pools = state(run)["turns"], state(run)["pools"]
     assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
         (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter")[:1 + (r in exploited)]
-        for role in ("pursuer", "evader")]
-    assert (run / "exploiter-pursuer").is_dir() == bool(exploited)
+        for role in ("pursuer", "evader") if kind == "main" or role in roles]
+    assert (run / "exploiter-pursuer").is_dir() == (bool(exploited) and "pursuer" in roles)
     assert {"circler", "blindside", "wall-runner", "hider"} <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
+    assert all(learner.curriculum is not None for learner in loop.learners.values())  # quick.yaml has one
+    assert all(learner.curriculum is None for learner in loop.exploiters.values())
 
 
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
-    built = {"n": 0}
+    built: dict[str, int] = {}
     original = selfplay_module.Learner
 
     class Stopping(original):
-        def __init__(self, *args, **kwargs) -> None:
-            built["n"] += 1
-            if built["n"] == 5:  # after mains and exploiters: the new learner of an exploiter that joined
-                raise KeyboardInterrupt
-            super().__init__(*args, **kwargs)
+        def __init__(self, job, role, *args, kind=selfplay_module.MAIN, **kwargs) -> None:
+            if kind == selfplay_module.EXPLOITER:
+                built[role] = built.get(role, 0) + 1
+                if built[role] == 2:  # a side's second exploiter: the fresh one after the first joined the pool
+                    raise KeyboardInterrupt
+            super().__init__(job, role, *args, kind=kind, **kwargs)
 
     monkeypatch.setattr(selfplay_module, "Learner", Stopping)
     with pytest.raises(SelfPlayInterrupted):

@@ -201,7 +201,7 @@ class Learner:
         t = job.scenario.training
         self.callbacks: list[Any] = []
         self.curriculum: CurriculumCallback | None = None
-        if t.curriculum.enabled:
+        if t.curriculum.enabled and kind == MAIN:  # an exploiter plays the real game: the holes it finds are real
             self.curriculum = CurriculumCallback(job.scenario, t.curriculum.span(state.curriculum_steps))
             self.callbacks.append(self.curriculum)
         if self.fit is not None:
@@ -304,23 +304,30 @@ class SelfPlay:
             placeholder = None if simultaneous else self._mixed(opponent_of(role))
             view = games.faces[role] if games is not None else None
             self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
-            if every:
-                self.exploiters[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, kind=EXPLOITER)
         for r in range(1, self.settings.rounds + 1):
-            kinds = (MAIN, EXPLOITER) if every and r % every == 0 else (MAIN,)
-            if all(self.state.done(r, role, kind) for role in ROLES for kind in kinds):
+            exploiters = self.settings.league_exploiter_roles if self._exploiting(r, every) else []
+            turns = [(MAIN, role) for role in ROLES] + [(EXPLOITER, role) for role in ROLES if role in exploiters]
+            if all(self.state.done(r, role, kind) for kind, role in turns):
                 continue
             if games is not None:
                 self._joint_round(r, games)
             else:
-                for kind in kinds:  # the main agents first: the exploiters then train against the new ones
-                    for role in ROLES:
-                        if not self.state.done(r, role, kind):
-                            self._turn(r, role, kind)
+                for kind, role in turns:  # the main agents first: the exploiters then train against the new ones
+                    if not self.state.done(r, role, kind):
+                        self._turn(r, role, kind)
             self.report(self._summary(r))
             if after_round is not None and not after_round(r):
                 break
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
+
+    def _exploiting(self, r: int, every: int) -> bool:
+        """Whether the league's exploiters train in round ``r``: every ``every``-th round (never if 0), once the
+        run's rounds before ``r`` spent ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed
+        run decides alike)."""
+        if not every or r % every:
+            return False
+        spent = sum(turn.cpu_seconds for turn in self.state.turns if turn.round < r)
+        return spent >= 3600.0 * self.settings.league_exploiter_after
 
     def _joint_round(self, r: int, games: SimultaneousGame) -> None:
         """Round ``r`` of the simultaneous schedule: both learners in the same games for ``steps_per_round``
@@ -401,7 +408,6 @@ class SelfPlay:
         """Train ``role``'s ``kind`` learner for round ``r``, or the rest of it when it committed part of it.
         A main learner plays the other side's pool; a league's exploiter the other side's newest main."""
         sp, t = self.settings, self.scenario.training
-        learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         other = opponent_of(role)
         if kind == MAIN:
             pool = self.state.pools[other]
@@ -417,6 +423,9 @@ class SelfPlay:
             entry = pool.add(f"{other}-r{target.round:03d}", target.checkpoint, generation=target.round)
             mixed = MixedPolicy(other, [self._policy(other, entry.spec)], [entry.name])
             tracker = PoolTracker(pool, mixed)
+            if role not in self.exploiters:  # built at its first turn: a run may have spent hours without exploiters
+                self.exploiters[role] = Learner(self.job, role, mixed, self.run_dir, self.state, kind=EXPLOITER)
+        learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         model = learner.model
         progress = learner.progress(r)
         if progress is None:

@@ -353,6 +353,10 @@ def exploit(args: argparse.Namespace) -> None:
     from pecli.rl.train import TrainingInterrupted, TrainJob, train as run_training, with_overrides
 
     runs = final_players(args.zoo, args.cpu_hours, args.round)
+    unknown = sorted(set(args.runs or []) - set(runs))
+    if unknown:
+        sys.exit(f"no run {', '.join(unknown)} at that budget under {args.zoo} (there: {', '.join(runs)})")
+    runs = {name: players for name, players in runs.items() if not args.runs or name in args.runs}
     try:
         scenario = load_scenario(args.config)
         training = with_overrides(scenario, {"steps": args.steps, "belief": "none", "curriculum.enabled": False})
@@ -403,6 +407,7 @@ def main() -> None:
     probe.add_argument("--steps", type=int, default=200_000, help="transitions the exploiting learner trains")
     probe.add_argument("--episodes", type=int, default=500)
     probe.add_argument("--seed", type=int, default=0, help="the exploiting learner's seed")
+    probe.add_argument("--runs", nargs="+", default=None, help="only these runs (default: every run)")
     probe.add_argument("--config", default="tuned", help="the scenario they play")
     probe_at = probe.add_mutually_exclusive_group()
     probe_at.add_argument("--cpu-hours", type=float, default=None, help="each run's players at this CPU budget")

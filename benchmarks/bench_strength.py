@@ -61,7 +61,7 @@ from scipy.stats import ttest_ind
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from pecli.cli.common import sigterm_stops  # noqa: E402
+from pecli.cli.common import one_torch_thread, sigterm_stops  # noqa: E402
 from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
@@ -305,23 +305,18 @@ def movement(recording: Recording) -> dict[str, float]:
 
 def behaviour(args: argparse.Namespace) -> None:
     """How each evader plays against one pursuer (is it caught by a failed search or a lost chase?)."""
-    scenario = load_scenario(args.config)
-    try:  # every player loads before the first game: a wrong name ends in one line
-        resolve_policy(args.pursuer, "pursuer", scenario)
-        for name in args.evaders:
-            resolve_policy(name, "evader", scenario)
+    try:  # the scenario and every player load before the first game: a wrong name ends in one line
+        scenario = load_scenario(args.config)
+        pursuer = resolve_policy(args.pursuer, "pursuer", scenario, seed=1)
+        evaders = {name: resolve_policy(name, "evader", scenario, seed=2) for name in args.evaders}
     except PecliError as error:
         sys.exit(str(error))
+    one_torch_thread()
     print(f"against {args.pursuer} on {scenario.name}, {args.episodes} games each (means over the steps they lasted)\n")
     print("| evader | caught | seen by the pursuer | sees the pursuer | speed unseen / seeing it (m/step) | distance "
           "| to the nearest wall |\n| --- | ---: | ---: | ---: | --- | ---: | ---: |")
     drawn: list[Path] = []
-    for name in args.evaders:
-        pursuer = resolve_policy(args.pursuer, "pursuer", scenario, seed=1)
-        evader = resolve_policy(name, "evader", scenario, seed=2)
-        torch = sys.modules.get("torch")
-        if torch is not None:
-            torch.set_num_threads(1)
+    for name, evader in evaders.items():  # play_match resets both players for each match
         _, recording = play_match(scenario, pursuer, evader, args.episodes, seed=0, record=args.episodes)
         m = movement(recording)
         print(f"| {name} | {m['caught']:.2f} | {m['seen']:.2f} | {m['sees']:.2f} | {m['speed unseen']:.3f} / "

@@ -200,6 +200,7 @@ class Hider(_Evader):
     clearance = 3.0  # m: its path to a spot keeps at least this far from the pursuer
     behind_weight = 3.0  # m of distance a spot right behind the pursuer is worth
     path_points = 8  # points of the straight path to a spot that are checked against the pursuer's sight
+    sight_weight = 10.0  # sensor ranges of distance a path wholly in the pursuer's sight costs
 
     def _allocate(self, n: int) -> None:
         super()._allocate(n)
@@ -237,7 +238,7 @@ class Hider(_Evader):
         known = np.any(heading != 0.0, axis=1)[:, None, None]
         in_wedge = np.einsum("mj,mkpj->mkp", heading, offset) >= np.cos(0.5 * sensor.fov) * gap
         sighted = (gap <= sensor.range) & (in_wedge | ~known) | (gap < self.clearance)
-        score = distance + self.behind_weight * (1.0 - ahead) - 10.0 * sensor.range * sighted.mean(axis=2)
+        score = distance + self.behind_weight * (1.0 - ahead) - self.sight_weight * sensor.range * sighted.mean(axis=2)
         return self.spots[np.argmax(score, axis=1)]
 
 

@@ -299,13 +299,12 @@ class SelfPlay:
         if simultaneous:
             beliefs = {role: self.scenario.training.belief != "none" for role in ROLES}
             games = SimultaneousGame(self.scenario, self.scenario.training.n_envs, self.job.seed, history=beliefs)
-        every = self.settings.league_exploiter_every if self.settings.opponents == "league" else 0
         for role in ROLES:
             placeholder = None if simultaneous else self._mixed(opponent_of(role))
             view = games.faces[role] if games is not None else None
             self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
         for r in range(1, self.settings.rounds + 1):
-            exploiters = self.settings.league_exploiter_roles if self._exploiting(r, every) else []
+            exploiters = self._exploiters(r)
             turns = [(MAIN, role) for role in ROLES] + [(EXPLOITER, role) for role in ROLES if role in exploiters]
             if all(self.state.done(r, role, kind) for kind, role in turns):
                 continue
@@ -320,14 +319,16 @@ class SelfPlay:
                 break
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
 
-    def _exploiting(self, r: int, every: int) -> bool:
-        """Whether the league's exploiters train in round ``r``: every ``every``-th round (never if 0), once the
-        run's rounds before ``r`` spent ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed
-        run decides alike)."""
+    def _exploiters(self, r: int) -> list[Role]:
+        """The sides whose league exploiter trains in round ``r``: ``league_exploiter_roles`` in every
+        ``league_exploiter_every``-th round (never if 0, or outside a league), once the run's rounds before ``r``
+        spent ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""
+        sp = self.settings
+        every = sp.league_exploiter_every if sp.opponents == "league" else 0
         if not every or r % every:
-            return False
+            return []
         spent = sum(turn.cpu_seconds for turn in self.state.turns if turn.round < r)
-        return spent >= 3600.0 * self.settings.league_exploiter_after
+        return list(sp.league_exploiter_roles) if spent >= 3600.0 * sp.league_exploiter_after else []
 
     def _joint_round(self, r: int, games: SimultaneousGame) -> None:
         """Round ``r`` of the simultaneous schedule: both learners in the same games for ``steps_per_round``

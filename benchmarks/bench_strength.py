@@ -5,6 +5,7 @@
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
+    python benchmarks/bench_strength.py compare --arms control=ZOO_A exploiters=ZOO_B [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
@@ -40,6 +41,13 @@ the issue asks but cross-play hints at: a fresh ``none`` learner of the other si
 no curriculum, ``--steps`` transitions, in ``<zoo>/exploit``, resumable) and plays it 500 games; results are cached
 in ``<zoo>/exploit/results.json``. A robust pursuer keeps its capture rate against its own best response.
 
+``compare`` is an A/B of two or more zoos of the same runs (same names: same kind, schedule and seed), e.g. a control
+and a copy trained on with other settings from the same checkpoint: every arm's pursuers play the scripted evaders
+and the evaders of every *other* run of every arm (not their own, nor their twins in the other arms, which share
+their history), so each run meets the same evaders in every arm. It prints each arm's rows, each arm pooled
+against the first (z-test over episodes) and the per-run differences (paired t-test, a run as the unit), and
+how each arm's evaders fare against the other runs' pursuers. Cached in ``--out``.
+
 ``behaviour`` is a diagnostic, not a target: how evaders play against one pursuer (caught, seen, how fast they
 move while they see it and while they do not, how far they keep), to tell a lost search from a lost chase.
 """
@@ -57,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from scipy.stats import ttest_ind
+from scipy.stats import ttest_ind, ttest_rel
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -66,7 +74,7 @@ from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.experiment.runs import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
-from pecli.io import atomic_write_json  # noqa: E402
+from pecli.io import atomic_write_json, file_digest  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
@@ -288,6 +296,79 @@ def report(args: argparse.Namespace) -> None:
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
 
 
+def compare(args: argparse.Namespace) -> None:
+    arms: dict[str, dict[str, dict[str, Path]]] = {}
+    for entry in args.arms:
+        label, _, zoo = entry.partition("=")
+        if not label or not zoo or label in arms:
+            sys.exit(f"--arms {entry}: give each arm as LABEL=ZOO, with labels of their own")
+        print(f"{label}: {zoo}", file=sys.stderr)
+        arms[label] = final_players(Path(zoo), args.cpu_hours, args.round)
+    if len(arms) < 2:
+        sys.exit("--arms: an A/B needs two arms or more")
+    names = sorted(set.intersection(*(set(runs) for runs in arms.values())))
+    if not names:
+        sys.exit("the arms have no run in common at that budget (runs pair by name: kind, schedule, seed)")
+    try:
+        scenario = load_scenario(args.config)
+        paths = [str(runs[n][role]) for runs in arms.values() for n in names for role in ("pursuer", "evader")]
+        found = find_players(paths, scenario).players
+    except PecliError as error:
+        sys.exit(f"{error} (--config {args.config})")
+    by_identity = {p.identity: p for role in found for p in found[role]}  # an arm's copy of a checkpoint is one player
+    player = {(label, n, role): by_identity.get(file_digest(runs[n][role])) for label, runs in arms.items()
+              for n in names for role in ("pursuer", "evader")}
+    if None in player.values():
+        unplayable = next(key for key, p in player.items() if p is None)
+        sys.exit(f"{arms[unplayable[0]][unplayable[1]][unplayable[2]]} does not play scenario '{scenario.name}'")
+    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
+    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
+    met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n)] for n in names}
+
+    def evader(key: str | tuple[str, str]) -> Player:
+        return scripted[key] if isinstance(key, str) else player[(*key, "evader")]
+
+    pairings = [(player[(label, n, "pursuer")], evader(e)) for label in arms for n in names for e in met[n]]
+    pairings += [(pure, player[(label, n, "evader")]) for label in arms for n in names]
+    results = run_tournament(scenario, found, pairings, episodes=args.episodes, seeds=[0], out=args.out,
+                             workers=args.workers).grid()
+    faced = {(label, n): {e: (r.captures, r.episodes) for e in met[n]
+                          for r in [results[(player[(label, n, "pursuer")].name, evader(e).name)]]}
+             for label in arms for n in names}
+    budget = f"{args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"round {args.round}" if args.round else "the newest round"
+    print(f"{', '.join(arms)} at {budget}, {args.episodes} games per pairing; cross-play: the other runs' evaders "
+          f"of every arm\n")
+    print(f"| arm | run | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | cross-play | "
+          f"its evader: vs pure pursuit / vs the other pursuers | CPU-h |")
+    print("| --- | --- | --- | --- | ---: | --- | ---: |")
+
+    def share(rates: list[tuple[int, int]]) -> float:
+        return sum(c for c, _ in rates) / max(sum(m for _, m in rates), 1)
+
+    for label in arms:
+        for n in names:
+            mine = faced[(label, n)]
+            against = [faced[(other, o)][(label, n)] for other in arms for o in names if o != n]
+            held = results[(pure.name, player[(label, n, "evader")].name)]
+            print(f"| {label} | {n} | {' / '.join(f'{share([mine[e]]):.2f}' for e in HEURISTIC_EVADERS)} | "
+                  f"{' / '.join(f'{share([mine[e]]):.2f}' for e in ADVERSARIES)} | "
+                  f"{share([r for e, r in mine.items() if not isinstance(e, str)]):.2f} | "
+                  f"{held.captures / held.episodes:.2f} / {share(against):.2f} | "
+                  f"{cpu_hours_to(arms[label][n]['pursuer']):.2f} |")
+    first, *others = arms
+    per_run = {label: [share(list(faced[(label, n)].values())) for n in names] for label in arms}
+    c0, n0 = (sum(r[i] for n in names for r in faced[(first, n)].values()) for i in (0, 1))
+    print(f"\npursuers pooled over every evader they met ({len(names)} runs, {n0} games per arm): {first} {c0 / n0:.3f}")
+    for label in others:
+        c1, n1 = (sum(r[i] for n in names for r in faced[(label, n)].values()) for i in (0, 1))
+        diffs = [b - a for a, b in zip(per_run[first], per_run[label])]
+        paired = f"paired t-test p = {ttest_rel(per_run[label], per_run[first]).pvalue:.2g}" if len(names) > 1 else \
+            "a paired test needs 2 runs"
+        print(f"- {label} {c1 / n1:.3f}: z-test against {first} p = {two_proportion_z_test(c1, n1, c0, n0):.2g}; "
+              f"per run {', '.join(f'{d:+.3f}' for d in diffs)} ({paired})")
+
+
 def movement(recording: Recording) -> dict[str, float]:
     """What the evader of ``recording`` did, averaged over the steps its games lasted: how it was caught,
     seen and saw, how fast it moved (m/step) while it saw the pursuer and while it did not, how far it kept."""
@@ -360,7 +441,10 @@ def exploit(args: argparse.Namespace) -> None:
     learner = opponent_of(args.role)
     folder = args.zoo / "exploit"
     cache = folder / "results.json"
-    results = json.loads(cache.read_text()) if cache.is_file() else {}
+    try:
+        results = json.loads(cache.read_text()) if cache.is_file() else {}
+    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
+        sys.exit(f"{cache}: damaged ({exc}); delete it to measure again")
     print(f"each run's {args.role} against {'an' if learner == 'evader' else 'a'} {learner} trained on it alone ({args.steps:,} transitions, TD3, no "
           f"belief, no curriculum), {args.episodes} games\n")
     print(f"| run | {args.role} | capture rate | the {learner}'s training CPU-min |\n| --- | --- | ---: | ---: |")
@@ -407,6 +491,15 @@ def main() -> None:
     probe_at = probe.add_mutually_exclusive_group()
     probe_at.add_argument("--cpu-hours", type=float, default=None, help="each run's players at this CPU budget")
     probe_at.add_argument("--round", type=int, default=None, help="each run's players after this many rounds")
+    ab = sub.add_parser("compare")
+    ab.add_argument("--arms", nargs="+", required=True, help="LABEL=ZOO for each arm, the control first")
+    ab.add_argument("--out", type=Path, default=Path("runs/compare"), help="where the games are cached")
+    ab.add_argument("--episodes", type=int, default=500)
+    ab.add_argument("--workers", type=int, default=2)
+    ab.add_argument("--config", default="tuned", help="the scenario they play")
+    ab_at = ab.add_mutually_exclusive_group()
+    ab_at.add_argument("--cpu-hours", type=float, default=None, help="every run at this CPU budget")
+    ab_at.add_argument("--round", type=int, default=None, help="every run after this many rounds")
     moves = sub.add_parser("behaviour")
     moves.add_argument("--pursuer", required=True, help="a checkpoint or built-in pursuer")
     moves.add_argument("--evaders", nargs="+", required=True, help="checkpoints or built-in evaders")
@@ -438,7 +531,7 @@ def main() -> None:
     at.add_argument("--round", type=int, default=None,
                     help="compare every run after this many rounds (equal transitions per main learner, not CPU)")
     args = parser.parse_args()
-    {"train": train, "report": report, "exploit": exploit, "behaviour": behaviour}[args.what](args)
+    {"train": train, "report": report, "exploit": exploit, "compare": compare, "behaviour": behaviour}[args.what](args)
 
 
 if __name__ == "__main__":

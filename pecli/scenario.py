@@ -270,6 +270,11 @@ class SelfPlay(_Model):
         default=0.5, gt=0, le=1,
         description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",
     )
+    league_exploiter_timeout: int = Field(
+        default=0, ge=0, le=100_000,
+        description="(ours) league: an exploiter joins its side's pool at the end of its k-th turn without joining, "
+        "whatever it won (AlphaStar's timeout), and starts afresh; 0: it joins only by winning exploiter_join",
+    )
 
     @model_validator(mode="after")
     def _league_alternates(self) -> SelfPlay:

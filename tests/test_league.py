@@ -116,6 +116,32 @@ def test_the_exploiters_train_every_kth_round_once_the_run_spent_its_cpu_or_neve
     assert all(learner.curriculum is None for learner in loop.exploiters.values())
 
 
+def test_an_exploiter_that_does_not_win_joins_at_its_timeout(quick: Scenario, tmp_path: Path) -> None:
+    """``exploiter_join: 1``: an exploiter joins by winning every game of its turn, or at the end of its second
+    turn since it started afresh (a timeout of 2), and starts afresh after either."""
+    league = with_overrides(quick, {**TINY, "selfplay.rounds": 3, "selfplay.exploiter_join": 1.0,
+                                    "selfplay.league_exploiter_timeout": 2})
+    lines: list[str] = []
+    SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lines.append).run()
+    run = tmp_path / "lg"
+    turns, pools = state(run)["turns"], state(run)["pools"]
+    timeouts = 0
+    for role in ("pursuer", "evader"):
+        since = 0  # the exploiter's turns since it started afresh
+        for t in (t for t in turns if t["learner"] == "exploiter" and t["role"] == role):
+            since += 1
+            meta = read_metadata(run / t["checkpoint"])
+            assert (meta.parent == "") == (since == 1)
+            opponent = meta.opponents[0]
+            won = opponent["episodes"] > 0 and opponent["opponent_wins"] == 0
+            assert t["joined"] == (won or since == 2)
+            assert any(e["spec"] == t["checkpoint"] for e in pools[role]["entries"]) == t["joined"]
+            timeouts += t["joined"] and not won
+            since = 0 if t["joined"] else since
+    assert timeouts >= 2  # with this seed: the evader exploiter never wins a game
+    assert any("joins the pool (its timeout)" in line for line in lines)
+
+
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     built: dict[str, int] = {}
     original = selfplay_module.Learner

@@ -479,7 +479,8 @@ class SelfPlay:
     def _finish_turn(self, r: int, role: Role, kind: str, tracker: PoolTracker, commit: Callable[[], Path]) -> None:
         """The learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
         the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it.
-        A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games, then starts afresh."""
+        A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games, or at the end of its
+        ``league_exploiter_timeout``-th turn without joining, then starts afresh."""
         weights = dict(zip(tracker.opponent.names, tracker.opponent.weights))
         opponents = [
             {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
@@ -487,8 +488,8 @@ class SelfPlay:
             for e in tracker.pool.entries
         ]
         lost = sum(o["opponent_wins"] for o in opponents)
-        joined = kind == EXPLOITER and tracker.episodes > 0 and \
-            1 - lost / tracker.episodes >= self.settings.exploiter_join
+        won = tracker.episodes > 0 and 1 - lost / tracker.episodes >= self.settings.exploiter_join
+        joined = kind == EXPLOITER and (won or self._timed_out(role))
         source = commit()
         learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         self._publish(r, role, source, tracker.episodes, tracker.captures, opponents, len(tracker.opponent.names),
@@ -496,6 +497,18 @@ class SelfPlay:
         self._save_state()
         if joined:  # AlphaStar's exploiters start again once they join: a new learner, its old state gone
             self.exploiters[role] = Learner(self.job, role, tracker.opponent, self.run_dir, self.state, kind=EXPLOITER)
+
+    def _timed_out(self, role: Role) -> bool:
+        """Whether ``role``'s exploiter, in the turn ending now, has trained ``league_exploiter_timeout`` turns
+        since it last started afresh (counted from the record: a resumed run counts alike)."""
+        timeout = self.settings.league_exploiter_timeout
+        turns = 1  # the one ending now, not recorded yet
+        for turn in reversed(self.state.turns):
+            if turn.role == role and turn.learner == EXPLOITER:
+                if turn.joined:
+                    break
+                turns += 1
+        return 0 < timeout <= turns
 
     def _publish(self, r: int, role: Role, source: Path, episodes: int, captures: int, opponents: list[dict[str, Any]],
                  pool_size: int, cpu_seconds: float, kind: str = MAIN, joined: bool = False) -> None:
@@ -533,7 +546,8 @@ class SelfPlay:
             if turn.learner == MAIN:
                 parts.append(f"{role} {what} {rate:.2f} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
             else:
+                won = rate >= self.settings.exploiter_join
                 parts.append(f"{role} exploiter {what} {rate:.2f} vs the main {opponent_of(role)}"
-                             + (" and joins the pool" if turn.joined else ""))
+                             + (" and joins the pool" + ("" if won else " (its timeout)") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s)"

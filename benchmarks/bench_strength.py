@@ -208,6 +208,14 @@ def print_cross_play(faced: Faced, runs: list[str]) -> None:
         print(f"| {name} | {' | '.join(cells)} |")
 
 
+def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Player, dict[str, list[Player]]]:
+    """The scripted evaders the pursuers meet (by name), pure pursuit (which the evaders meet), and ``found``'s
+    players with them added."""
+    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
+    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
+    return scripted, pure, {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
+
+
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.cpu_hours, args.round)
     try:
@@ -221,9 +229,7 @@ def report(args: argparse.Namespace) -> None:
         sys.exit(f"{unplayable[0]} does not play scenario '{scenario.name}' (--config {args.config})")
     pursuers = {name: by_path[latest["pursuer"].resolve()] for name, latest in runs.items()}
     evaders = {name: by_path[latest["evader"].resolve()] for name, latest in runs.items()}
-    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
-    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
-    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
+    scripted, pure, found = with_scripted(found)
     pairings: list[tuple[Player, Player]] = []
     for name, pursuer in pursuers.items():
         pairings += [(pursuer, e) for e in scripted.values()]
@@ -321,9 +327,7 @@ def compare(args: argparse.Namespace) -> None:
     if None in player.values():
         unplayable = next(key for key, p in player.items() if p is None)
         sys.exit(f"{arms[unplayable[0]][unplayable[1]][unplayable[2]]} does not play scenario '{scenario.name}'")
-    scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
-    pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
-    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
+    scripted, pure, found = with_scripted(found)
     met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n)] for n in names}
 
     def evader(key: str | tuple[str, str]) -> Player:

@@ -542,12 +542,12 @@ class SelfPlay:
         for turn in (t for t in self.state.turns if t.round == r):
             role = turn.role
             rate = turn.capture_rate if role == "pursuer" else 1 - turn.capture_rate
-            what = "captures" if role == "pursuer" else "escapes"
+            what = ("captures" if role == "pursuer" else "escapes") + (f" {rate:.2f}" if turn.episodes else " -")
             if turn.learner == MAIN:
-                parts.append(f"{role} {what} {rate:.2f} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
+                parts.append(f"{role} {what} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
             else:
                 won = rate >= self.settings.exploiter_join
-                parts.append(f"{role} exploiter {what} {rate:.2f} vs the main {opponent_of(role)}"
+                parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}"
                              + (" and joins the pool" + ("" if won else " (its timeout)") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s)"

@@ -303,6 +303,7 @@ def report(args: argparse.Namespace) -> None:
 
 
 def compare(args: argparse.Namespace) -> None:
+    """An A/B of zoos of the same runs at an equal budget (see the module's docstring)."""
     arms: dict[str, dict[str, dict[str, Path]]] = {}
     for entry in args.arms:
         label, _, zoo = entry.partition("=")

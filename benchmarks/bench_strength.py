@@ -80,7 +80,7 @@ from pecli.policies import resolve_policy  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
 from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
 from pecli.roles import opponent_of  # noqa: E402
-from pecli.scenario import load_scenario, read_yaml  # noqa: E402
+from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
@@ -208,6 +208,23 @@ def print_cross_play(faced: Faced, runs: list[str]) -> None:
         print(f"| {name} | {' | '.join(cells)} |")
 
 
+def checkpoint_players(paths: list[Path], config: str) -> tuple[Scenario, dict[Path, Player], dict[str, list[Player]]]:
+    """The scenario ``config``, the tournament player of each checkpoint of ``paths`` and every player found; a
+    checkpoint is matched by its content, so copies of one (an A/B's arms share their history) are one player.
+    Exits with one line when the scenario or a checkpoint does not load, or a checkpoint plays another game."""
+    try:
+        scenario = load_scenario(config)
+        found = find_players([str(p) for p in paths], scenario).players
+    except PecliError as error:  # a scenario the runs did not train on, a damaged checkpoint
+        sys.exit(f"{error} (--config {config})")
+    by_identity = {p.identity: p for role in found for p in found[role]}
+    of = {path: by_identity.get(file_digest(path)) for path in paths}
+    unplayable = sorted(str(path) for path, player in of.items() if player is None)
+    if unplayable:
+        sys.exit(f"{unplayable[0]} does not play scenario '{scenario.name}' (--config {config})")
+    return scenario, of, found
+
+
 def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Player, dict[str, list[Player]]]:
     """The scripted evaders the pursuers meet (by name), pure pursuit (which the evaders meet), and ``found``'s
     players with them added."""
@@ -218,17 +235,9 @@ def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Pl
 
 def report(args: argparse.Namespace) -> None:
     runs = final_players(args.zoo, args.cpu_hours, args.round)
-    try:
-        scenario = load_scenario(args.config)
-        found = find_players([str(p) for latest in runs.values() for p in latest.values()], scenario).players
-    except PecliError as error:  # a scenario the runs did not train on, a damaged checkpoint
-        sys.exit(f"{error} (--config {args.config})")
-    by_path = {Path(p.spec).resolve(): p for role in found for p in found[role]}
-    unplayable = sorted(str(p) for latest in runs.values() for p in latest.values() if p.resolve() not in by_path)
-    if unplayable:
-        sys.exit(f"{unplayable[0]} does not play scenario '{scenario.name}' (--config {args.config})")
-    pursuers = {name: by_path[latest["pursuer"].resolve()] for name, latest in runs.items()}
-    evaders = {name: by_path[latest["evader"].resolve()] for name, latest in runs.items()}
+    scenario, of, found = checkpoint_players([p for latest in runs.values() for p in latest.values()], args.config)
+    pursuers = {name: of[latest["pursuer"]] for name, latest in runs.items()}
+    evaders = {name: of[latest["evader"]] for name, latest in runs.items()}
     scripted, pure, found = with_scripted(found)
     pairings: list[tuple[Player, Player]] = []
     for name, pursuer in pursuers.items():
@@ -316,18 +325,10 @@ def compare(args: argparse.Namespace) -> None:
     names = sorted(set.intersection(*(set(runs) for runs in arms.values())))
     if not names:
         sys.exit("the arms have no run in common at that budget (runs pair by name: kind, schedule, seed)")
-    try:
-        scenario = load_scenario(args.config)
-        paths = [str(runs[n][role]) for runs in arms.values() for n in names for role in ("pursuer", "evader")]
-        found = find_players(paths, scenario).players
-    except PecliError as error:
-        sys.exit(f"{error} (--config {args.config})")
-    by_identity = {p.identity: p for role in found for p in found[role]}  # an arm's copy of a checkpoint is one player
-    player = {(label, n, role): by_identity.get(file_digest(runs[n][role])) for label, runs in arms.items()
-              for n in names for role in ("pursuer", "evader")}
-    if None in player.values():
-        unplayable = next(key for key, p in player.items() if p is None)
-        sys.exit(f"{arms[unplayable[0]][unplayable[1]][unplayable[2]]} does not play scenario '{scenario.name}'")
+    scenario, of, found = checkpoint_players(
+        [runs[n][role] for runs in arms.values() for n in names for role in ("pursuer", "evader")], args.config)
+    player = {(label, n, role): of[runs[n][role]] for label, runs in arms.items() for n in names
+              for role in ("pursuer", "evader")}
     scripted, pure, found = with_scripted(found)
     met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n)] for n in names}
 
@@ -338,9 +339,11 @@ def compare(args: argparse.Namespace) -> None:
     pairings += [(pure, player[(label, n, "evader")]) for label in arms for n in names]
     results = run_tournament(scenario, found, pairings, episodes=args.episodes, seeds=[0], out=args.out,
                              workers=args.workers).grid()
-    faced = {(label, n): {e: (r.captures, r.episodes) for e in met[n]
-                          for r in [results[(player[(label, n, "pursuer")].name, evader(e).name)]]}
-             for label in arms for n in names}
+    faced = {}
+    for label in arms:
+        for n in names:
+            mine = [results[(player[(label, n, "pursuer")].name, evader(e).name)] for e in met[n]]
+            faced[(label, n)] = {e: (r.captures, r.episodes) for e, r in zip(met[n], mine)}
     budget = f"{args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"round {args.round}" if args.round else "the newest round"
     print(f"{', '.join(arms)} at {budget}, {args.episodes} games per pairing; cross-play: the other runs' evaders "
           f"of every arm\n")

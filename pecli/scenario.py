@@ -268,7 +268,14 @@ class SelfPlay(_Model):
     )
     exploiter_join: Real = Field(
         default=0.5, gt=0, le=1,
-        description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games",
+        description="(ours) league: an exploiter joins its side's pool when it wins this share of its turn's games "
+        "(or of its join games, with exploiter_join_games)",
+    )
+    exploiter_join_games: int = Field(
+        default=0, ge=0, le=100_000,
+        description="(ours) league: N > 0: after its turn the exploiter's final network plays N games against the "
+        "main agent it trained against, and these decide whether it joins (AlphaStar's exploiters join on their win "
+        "rate against the main agents); 0: its record over the whole turn, learning included, decides",
     )
     league_exploiter_timeout: int = Field(
         default=0, ge=0, le=100_000,

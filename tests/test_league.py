@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from pecli.errors import ConfigError
+from pecli.match import play_match
+from pecli.policies import resolve_policy
 from pecli.rl import selfplay as selfplay_module
 from pecli.rl.pool import OpponentPool
 from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob
@@ -140,6 +142,35 @@ def test_an_exploiter_that_does_not_win_joins_at_its_timeout(quick: Scenario, tm
             since = 0 if t["joined"] else since
     assert timeouts >= 2  # with this seed: the evader exploiter never wins a game
     assert any("joins the pool (its timeout)" in line for line in lines)
+
+
+def test_join_games_decide_whether_an_exploiter_joins(quick: Scenario, tmp_path: Path) -> None:
+    """``exploiter_join_games: N``: after its turn the exploiter's final network plays N games against the main
+    agent it trained against; they decide the join and are recorded, and replaying them from the checkpoints gives
+    the same rate (seeded by the turn)."""
+    league = with_overrides(quick, {**TINY, "selfplay.exploiter_join_games": 12, "selfplay.exploiter_join": 0.3})
+    lines: list[str] = []
+    SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lines.append).run()
+    run = tmp_path / "lg"
+    turns, pools = state(run)["turns"], state(run)["pools"]
+    exploiters = [t for t in turns if t["learner"] == "exploiter"]
+    assert len(exploiters) == 4 and all(t["join_rate"] is not None for t in exploiters)
+    assert all(t["join_rate"] is None and t["joined_by"] == "" for t in turns if t["learner"] == "main")
+    for t in exploiters:
+        assert t["joined"] == (t["join_rate"] >= 0.3) and t["joined_by"] == ("win" if t["joined"] else "")
+        assert any(e["spec"] == t["checkpoint"] for e in pools[t["role"]]["entries"]) == t["joined"]
+        role, other = t["role"], "evader" if t["role"] == "pursuer" else "pursuer"
+        me = resolve_policy(str(run / t["checkpoint"]), role, league)
+        them = resolve_policy(str(run / read_metadata(run / t["checkpoint"]).opponents[0]["spec"]), other, league)
+        players = (me, them) if role == "pursuer" else (them, me)
+        result, _ = play_match(league, *players, episodes=12,
+                               seed=selfplay_module.turn_seed(0, t["round"], role, "exploiter") + 1)
+        assert (result.capture_rate if role == "pursuer" else 1 - result.capture_rate) == pytest.approx(t["join_rate"], abs=1e-4)
+    def by_record(t: dict) -> bool:  # what the turn's own games would have decided
+        rate = t["captures"] / t["episodes"] if t["episodes"] else float("nan")
+        return (rate if t["role"] == "pursuer" else 1 - rate) >= 0.3
+    assert any(t["joined"] != by_record(t) for t in exploiters)  # with this seed: the join games overrule the record
+    assert sum(" in its join games" in line for line in lines) == 2
 
 
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:

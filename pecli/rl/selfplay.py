@@ -38,8 +38,10 @@ from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json
+from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
+from pecli.policies.learned import LearnedPolicy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.buffers import end_episodes
@@ -101,6 +103,8 @@ class Turn:
     opponents: int  # entries in the opponents' pool during the turn
     learner: str = MAIN  # main, or exploiter (league)
     joined: bool = False  # an exploiter's checkpoint joined its side's pool
+    joined_by: str = ""  # why it joined: "win" or "timeout" ("" if it did not, or in a record older than the field)
+    join_rate: float | None = None  # an exploiter's win rate in its join games (exploiter_join_games), if it played them
 
     @property
     def capture_rate(self) -> float:
@@ -479,8 +483,9 @@ class SelfPlay:
     def _finish_turn(self, r: int, role: Role, kind: str, tracker: PoolTracker, commit: Callable[[], Path]) -> None:
         """The learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
         the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it.
-        A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games, or at the end of its
-        ``league_exploiter_timeout``-th turn without joining, then starts afresh."""
+        A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games (of its join games, with
+        ``exploiter_join_games``), or at the end of its ``league_exploiter_timeout``-th turn without joining, then
+        starts afresh."""
         weights = dict(zip(tracker.opponent.names, tracker.opponent.weights))
         opponents = [
             {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
@@ -488,15 +493,34 @@ class SelfPlay:
             for e in tracker.pool.entries
         ]
         lost = sum(o["opponent_wins"] for o in opponents)
-        won = tracker.episodes > 0 and 1 - lost / tracker.episodes >= self.settings.exploiter_join
-        joined = kind == EXPLOITER and (won or self._timed_out(role))
+        rate = 1 - lost / tracker.episodes if tracker.episodes else float("nan")
+        join_rate = None
+        if kind == EXPLOITER and self.settings.exploiter_join_games:  # played before the commit: its CPU counts
+            join_rate = self._join_games(r, role, tracker.pool.entries[0].spec)
+        joined_by = ""
+        if kind == EXPLOITER:
+            won = (rate if join_rate is None else join_rate) >= self.settings.exploiter_join  # nan: no game, not won
+            joined_by = "win" if won else "timeout" if self._timed_out(role) else ""
         source = commit()
         learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         self._publish(r, role, source, tracker.episodes, tracker.captures, opponents, len(tracker.opponent.names),
-                      learner.durable.record.extra["cpu_seconds"], kind, joined)
+                      learner.durable.record.extra["cpu_seconds"], kind, joined_by, join_rate)
         self._save_state()
-        if joined:  # AlphaStar's exploiters start again once they join: a new learner, its old state gone
+        if joined_by:  # AlphaStar's exploiters start again once they join: a new learner, its old state gone
             self.exploiters[role] = Learner(self.job, role, tracker.opponent, self.run_dir, self.state, kind=EXPLOITER)
+
+    def _join_games(self, r: int, role: Role, target: str) -> float:
+        """The share of ``exploiter_join_games`` games that ``role``'s exploiter, as its turn of round ``r`` ends,
+        wins against ``target``, the main agent it trained against: both frozen, from start states seeded by the
+        turn (a run resumed inside the turn plays the same games)."""
+        learner = self.exploiters[role]
+        me = LearnedPolicy(learner.model.policy.actor, role, self.scenario,
+                           checkpoint_meta(learner.train_job, learner.model, 0))
+        them = self._policy(opponent_of(role), target)
+        players = (me, them) if role == "pursuer" else (them, me)
+        result, _ = play_match(self.scenario, *players, episodes=self.settings.exploiter_join_games,
+                               seed=turn_seed(self.state.seed, r, role, EXPLOITER) + 1)
+        return result.capture_rate if role == "pursuer" else 1 - result.capture_rate
 
     def _timed_out(self, role: Role) -> bool:
         """Whether ``role``'s exploiter, in the turn ending now, has trained ``league_exploiter_timeout`` turns
@@ -511,10 +535,11 @@ class SelfPlay:
         return 0 < timeout <= turns
 
     def _publish(self, r: int, role: Role, source: Path, episodes: int, captures: int, opponents: list[dict[str, Any]],
-                 pool_size: int, cpu_seconds: float, kind: str = MAIN, joined: bool = False) -> None:
+                 pool_size: int, cpu_seconds: float, kind: str = MAIN, joined_by: str = "",
+                 join_rate: float | None = None) -> None:
         """Make the committed model ``source`` the checkpoint of round ``r`` of ``role``'s ``kind`` learner,
-        add it to its side's pool (a main learner's always, an exploiter's if it ``joined``) and record the
-        turn (the caller saves the state)."""
+        add it to its side's pool (a main learner's always, an exploiter's if it joined: ``joined_by`` a reason)
+        and record the turn (the caller saves the state)."""
         learner = self.learners[role] if kind == MAIN else self.exploiters[role]
         previous = self.state.latest(role, kind)
         total = sum(t.episodes for t in self.state.turns if t.role == role and t.learner == kind) + episodes
@@ -528,10 +553,11 @@ class SelfPlay:
         )
         path = self.run_dir.publish(source, learner.folder, checkpoint_name(r), meta)
         relative = str(path.relative_to(self.run_dir.path))
-        if kind == MAIN or joined:
+        if kind == MAIN or joined_by:
             self.state.pools[role].add(f"{learner.folder}-r{r:03d}", relative, generation=r)
         self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), episodes, captures,
-                                     round(cpu_seconds, 2), relative, pool_size, kind, joined))
+                                     round(cpu_seconds, 2), relative, pool_size, kind, bool(joined_by), joined_by,
+                                     None if join_rate is None else round(join_rate, 4)))
 
     def _save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())
@@ -546,8 +572,10 @@ class SelfPlay:
             if turn.learner == MAIN:
                 parts.append(f"{role} {what} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
             else:
-                won = rate >= self.settings.exploiter_join
-                parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}"
-                             + (" and joins the pool" + ("" if won else " (its timeout)") if turn.joined else ""))
+                tried = "" if turn.join_rate is None else f", {turn.join_rate:.2f} in its join games"
+                by_timeout = turn.joined_by == "timeout" or (  # a record older than joined_by: as it would be now
+                    not turn.joined_by and turn.join_rate is None and rate < self.settings.exploiter_join)
+                parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}{tried}"
+                             + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s)"

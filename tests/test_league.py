@@ -165,7 +165,9 @@ def test_join_games_decide_whether_an_exploiter_joins(quick: Scenario, tmp_path:
         players = (me, them) if role == "pursuer" else (them, me)
         result, _ = play_match(league, *players, episodes=12,
                                seed=selfplay_module.turn_seed(0, t["round"], role, "exploiter") + 1)
-        assert (result.capture_rate if role == "pursuer" else 1 - result.capture_rate) == pytest.approx(t["join_rate"], abs=1e-4)
+        won = result.capture_rate if role == "pursuer" else 1 - result.capture_rate
+        assert won == pytest.approx(t["join_rate"], abs=1e-4)
+
     def by_record(t: dict) -> bool:  # what the turn's own games would have decided
         rate = t["captures"] / t["episodes"] if t["episodes"] else float("nan")
         return (rate if t["role"] == "pursuer" else 1 - rate) >= 0.3

@@ -104,7 +104,7 @@ class Turn:
     learner: str = MAIN  # main, or exploiter (league)
     joined: bool = False  # an exploiter's checkpoint joined its side's pool
     joined_by: str = ""  # why it joined: "win" or "timeout" ("" if it did not, or in a record older than the field)
-    join_rate: float | None = None  # an exploiter's win rate in its join games (exploiter_join_games), if it played them
+    join_rate: float | None = None  # an exploiter's win rate in its join games (exploiter_join_games), if any
 
     @property
     def capture_rate(self) -> float:

@@ -42,7 +42,7 @@ def test_builtin_experiments() -> None:
 
     assert SELFPLAY_STATE == STATE_FILE
     assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
-            "strength-exploiters"} <= set(
+            "strength-exploiters", "strength-joingames"} <= set(
         builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -63,6 +63,8 @@ def test_builtin_experiments() -> None:
         "league", 0, 0.3, "pfsp")
     late = load_experiment("strength-exploiters").runs()[0].scenario.training.selfplay  # its exploiter after 2 CPU-h
     assert (late.league_exploiter_every, late.league_exploiter_after, late.league_exploiter_roles) == (1, 2.0, ["evader"])
+    joining = load_experiment("strength-joingames").runs()[0].scenario.training.selfplay  # join games, a timeout
+    assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (3.0, 200, 3)
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -15,6 +15,7 @@ from pecli.rl import selfplay as selfplay_module
 from pecli.rl.pool import OpponentPool
 from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob
 from pecli.rl.train import with_overrides
+from pecli.roles import opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import read_metadata
 
@@ -159,9 +160,10 @@ def test_join_games_decide_whether_an_exploiter_joins(quick: Scenario, tmp_path:
     for t in exploiters:
         assert t["joined"] == (t["join_rate"] >= 0.3) and t["joined_by"] == ("win" if t["joined"] else "")
         assert any(e["spec"] == t["checkpoint"] for e in pools[t["role"]]["entries"]) == t["joined"]
-        role, other = t["role"], "evader" if t["role"] == "pursuer" else "pursuer"
+        role = t["role"]
         me = resolve_policy(str(run / t["checkpoint"]), role, league)
-        them = resolve_policy(str(run / read_metadata(run / t["checkpoint"]).opponents[0]["spec"]), other, league)
+        target = read_metadata(run / t["checkpoint"]).opponents[0]["spec"]  # the main agent it trained against
+        them = resolve_policy(str(run / target), opponent_of(role), league)
         players = (me, them) if role == "pursuer" else (them, me)
         result, _ = play_match(league, *players, episodes=12,
                                seed=selfplay_module.turn_seed(0, t["round"], role, "exploiter") + 1)

@@ -38,10 +38,8 @@ from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json
-from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
-from pecli.policies.learned import LearnedPolicy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl.buffers import end_episodes
@@ -57,7 +55,7 @@ from pecli.rl.callbacks import (
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
-from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, resume_seed
+from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, play_live, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings
@@ -514,13 +512,9 @@ class SelfPlay:
         wins against ``target``, the main agent it trained against: both frozen, from start states seeded by the
         turn (a run resumed inside the turn plays the same games)."""
         learner = self.exploiters[role]
-        me = LearnedPolicy(learner.model.policy.actor, role, self.scenario,
-                           checkpoint_meta(learner.train_job, learner.model, 0))
-        them = self._policy(opponent_of(role), target)
-        players = (me, them) if role == "pursuer" else (them, me)
-        result, _ = play_match(self.scenario, *players, episodes=self.settings.exploiter_join_games,
-                               seed=turn_seed(self.state.seed, r, role, EXPLOITER) + 1)
-        return result.capture_rate if role == "pursuer" else 1 - result.capture_rate
+        captured = play_live(learner.train_job, learner.model, self._policy(opponent_of(role), target),
+                             self.settings.exploiter_join_games, turn_seed(self.state.seed, r, role, EXPLOITER) + 1)
+        return captured if role == "pursuer" else 1 - captured
 
     def _timed_out(self, role: Role) -> bool:
         """Whether ``role``'s exploiter, in the turn ending now, has trained ``league_exploiter_timeout`` turns
@@ -574,7 +568,7 @@ class SelfPlay:
             else:
                 tried = "" if turn.join_rate is None else f", {turn.join_rate:.2f} in its join games"
                 by_timeout = turn.joined_by == "timeout" or (  # a record older than joined_by: as it would be now
-                    not turn.joined_by and turn.join_rate is None and rate < self.settings.exploiter_join)
+                    not turn.joined_by and rate < self.settings.exploiter_join)
                 parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}{tried}"
                              + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)

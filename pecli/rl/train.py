@@ -22,6 +22,7 @@ from pecli.errors import PecliError
 from pecli.io import atomic_write_text
 from pecli.match import play_match
 from pecli.policies import resolve_policy
+from pecli.policies.base import Policy
 from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
@@ -210,18 +211,22 @@ def make_learner(job: TrainJob, opponent: Any, seed: int, tensorboard: Path | No
     return env, model, attach_belief(job, env, model)
 
 
+def play_live(job: TrainJob, model: Any, opponent: Policy, episodes: int, seed: int) -> float:
+    """The capture rate of ``episodes`` games between the live ``model`` (playing ``job.role``, without exploration
+    noise) and ``opponent``; the model's policy is left in evaluation mode (SB3 sets it back when it trains)."""
+    learner = LearnedPolicy(model.policy.actor, job.role, job.scenario, checkpoint_meta(job, model, 0))
+    players = (learner, opponent) if job.role == "pursuer" else (opponent, learner)
+    model.policy.set_training_mode(False)
+    result, _ = play_match(job.scenario, *players, episodes=episodes, seed=seed)
+    return result.capture_rate
+
+
 def evaluator(job: TrainJob, opponent: str) -> Callable[[Any], float]:
     """A function that plays the live model against ``opponent`` and returns the capture rate."""
-    t = job.scenario.training
-    scenario = job.scenario
 
     def evaluate(model: Any) -> float:
-        learner = LearnedPolicy(model.policy.actor, job.role, scenario, checkpoint_meta(job, model, 0))
-        other = resolve_policy(opponent, opponent_of(job.role), scenario, seed=job.seed)
-        players = (learner, other) if job.role == "pursuer" else (other, learner)
-        model.policy.set_training_mode(False)
-        result, _ = play_match(scenario, *players, episodes=t.eval_episodes, seed=10_000 + job.seed)
-        return result.capture_rate
+        other = resolve_policy(opponent, opponent_of(job.role), job.scenario, seed=job.seed)
+        return play_live(job, model, other, job.scenario.training.eval_episodes, 10_000 + job.seed)
 
     return evaluate
 

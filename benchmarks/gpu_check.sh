@@ -2,7 +2,8 @@
 # --device cuda end to end, on a machine with an NVIDIA GPU and torch already installed (pecli's own
 # dependencies installed, or their wheels in .whl/): train with the BiMDN belief on the GPU, resume the run
 # there with a larger budget (replay buffer and belief fitter restored), play the checkpoint on the CPU, export
-# it to ONNX, a self-play round on the GPU, and the speed of training on each device (bench_train.py device).
+# it to ONNX, self-play on the GPU (an alternating round, a simultaneous one, a league with exploiters and join
+# games resumed to a second round, its pursuer played on the CPU), and the speed of training on each device (bench_train.py device).
 # Prints PASS, or FAIL and the failed command; writes its logs to ${OUT:-runs/gpu_check} (relative to the
 # repository's root).
 #   bash benchmarks/gpu_check.sh [steps timed per device, default 8000]
@@ -35,5 +36,21 @@ EOF
 step pecli play --pursuer "$zoo/gpu/pursuer/final.zip" --evader greedy -c quick --episodes 50 --seed 0
 step pecli export onnx "$zoo/gpu/pursuer/final.zip" --out "$zoo/gpu.onnx"
 step pecli selfplay -c quick --belief bimdn --rounds 1 --steps-per-round 3000 --device cuda --zoo "$zoo" --name sp -q
+step pecli selfplay -c quick --belief bimdn --schedule simultaneous --rounds 1 --steps-per-round 3000 --device cuda \
+    --zoo "$zoo" --name sim -q
+league=(-c quick --belief bimdn --opponents league --steps-per-round 2000 --device cuda --zoo "$zoo" --name league -q
+        --set selfplay.league_exploiter_every=1 --set selfplay.exploiter_join_games=20)
+step pecli selfplay "${league[@]}" --rounds 1
+step pecli selfplay "${league[@]}" --rounds 2 --resume
+python3 - "$zoo/league/selfplay.json" <<'EOF'
+import json, sys
+from pathlib import Path
+turns = json.loads(Path(sys.argv[1]).read_text())["turns"]
+assert max(t["round"] for t in turns) == 2, "the league run did not resume to round 2"
+exploiters = [t for t in turns if t["learner"] == "exploiter"]
+assert len(exploiters) == 4 and all(t["join_rate"] is not None for t in exploiters), exploiters
+print("league on the GPU: 2 rounds,", len(exploiters), "exploiter turns with join games")
+EOF
+step pecli play --pursuer "$zoo/league/pursuer/round-002.zip" --evader circler -c quick --episodes 50 --seed 0
 python3 benchmarks/bench_train.py device --steps "${1:-8000}" | tee "$out/device.md"
 echo PASS

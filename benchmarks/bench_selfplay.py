@@ -31,7 +31,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from pecli.scenario import load_scenario  # noqa: E402
 from pecli.tournament import find_players, run_tournament  # noqa: E402
 from pecli.zoo import Run  # noqa: E402
 

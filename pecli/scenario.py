@@ -251,6 +251,12 @@ class SelfPlay(_Model):
         description="(ours) league: the floor split among the scripted players alike (uniform), or by their pfsp "
         "weights, most to those that still beat the learner (pfsp)",
     )
+    league_exploiter_share: Real = Field(
+        default=0.0, ge=0, le=1,
+        description="(ours) league: the share of games the exploiters that joined the pool keep, together, split by "
+        "their pfsp weights (AlphaStar's main agents spend games on the league's exploiters); 0: they are drawn by "
+        "pfsp like any other checkpoint",
+    )
     league_exploiter_every: int = Field(
         default=1, ge=0, le=100_000,
         description="(ours) league: the exploiters train in every k-th round (1: every round, as AlphaStar's; 0: "
@@ -287,6 +293,9 @@ class SelfPlay(_Model):
     def _league_alternates(self) -> SelfPlay:
         if self.opponents == "league" and self.schedule != "alternating":
             raise ValueError("opponents 'league' needs the alternating schedule (the simultaneous one has no pools)")
+        if self.league_floor + self.league_exploiter_share > 1:
+            raise ValueError(f"league_floor ({self.league_floor}) and league_exploiter_share "
+                             f"({self.league_exploiter_share}) together keep more than all the games")
         return self
 
 

@@ -42,7 +42,7 @@ def test_builtin_experiments() -> None:
 
     assert SELFPLAY_STATE == STATE_FILE
     assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
-            "strength-exploiters", "strength-joingames"} <= set(
+            "strength-exploiters", "strength-joingames", "strength-share"} <= set(
         builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -65,6 +65,8 @@ def test_builtin_experiments() -> None:
     assert (late.league_exploiter_every, late.league_exploiter_after, late.league_exploiter_roles) == (1, 2.0, ["evader"])
     joining = load_experiment("strength-joingames").runs()[0].scenario.training.selfplay  # join games, a timeout
     assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (3.0, 200, 3)
+    sharing = load_experiment("strength-share").runs()[0].scenario.training.selfplay  # and a share of the games
+    assert (sharing.exploiter_join_games, sharing.league_exploiter_share, sharing.league_floor) == (200, 0.25, 0.3)
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -64,9 +64,54 @@ def test_a_pfsp_floor_goes_to_the_scripted_players_that_still_win() -> None:
         pool.weights("league", floor=0.5, split="elo")
 
 
+def test_the_joined_exploiters_keep_their_share() -> None:
+    pool = OpponentPool("evader")
+    pool.add("greedy", "greedy", generation=0)
+    for r in (1, 2):
+        pool.add(f"evader-r{r:03d}", f"evader/round-00{r}.zip", generation=r)
+        pool.add(f"exploiter-evader-r{r:03d}", f"exploiter-evader/round-00{r}.zip", generation=r)
+    for _ in range(50):
+        pool.observe("evader-r002", True)  # the newest main evader beats the learner; the rest never do
+        for name in ("greedy", "evader-r001", "exploiter-evader-r001", "exploiter-evader-r002"):
+            pool.observe(name, False)
+    pool.observe("exploiter-evader-r002", True)
+    assert [e.kind for e in pool.entries] == ["main", "main", "exploiter", "main", "exploiter"]
+    pfsp = pool.weights("pfsp")
+    league = pool.weights("league", floor=0.2, exploiter_share=0.3)
+    exploiters = [2, 4]
+    assert pfsp[exploiters].sum() < 0.05
+    assert league[exploiters].sum() == pytest.approx(0.3 + 0.5 * pfsp[exploiters].sum())
+    assert league[0] == pytest.approx(0.2 + 0.5 * pfsp[0])  # the scripted floor as before
+    assert league[4] > league[2]  # split by pfsp: most to the exploiter that still wins a game
+    assert league.sum() == pytest.approx(1.0)
+    assert np.allclose(pool.weights("league", floor=0.2, exploiter_share=0.0), pool.weights("league", floor=0.2))
+    only_exploiters = OpponentPool("evader")
+    only_exploiters.add("exploiter-evader-r001", "exploiter-evader/round-001.zip", generation=1)
+    assert only_exploiters.weights("league", exploiter_share=0.3) == pytest.approx([1.0])
+
+
 def test_a_league_needs_the_alternating_schedule(quick: Scenario) -> None:
     with pytest.raises(ConfigError, match="needs the alternating schedule"):
         with_overrides(quick, {"selfplay.opponents": "league", "selfplay.schedule": "simultaneous"})
+
+
+def test_the_floor_and_the_exploiters_share_cannot_keep_more_than_every_game(quick: Scenario) -> None:
+    with pytest.raises(ConfigError, match="together keep more than all the games"):
+        with_overrides(quick, {"selfplay.league_floor": 0.6, "selfplay.league_exploiter_share": 0.5})
+
+
+def test_a_main_pursuer_spends_the_exploiters_share_on_them(quick: Scenario, tmp_path: Path) -> None:
+    """Round 1's evader exploiter joins (a timeout of one turn); round 2's main pursuer then draws the joined
+    exploiters with at least ``league_exploiter_share`` of its weights."""
+    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_share": 0.4, "selfplay.exploiter_join": 1.0,
+                                    "selfplay.league_exploiter_timeout": 1, "selfplay.league_exploiter_roles": ["evader"]})
+    SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None).run()
+    run = tmp_path / "lg"
+    assert [t["joined"] for t in state(run)["turns"] if t["learner"] == "exploiter" and t["round"] == 1] == [True]
+    weights = {o["name"]: o["weight"] for o in read_metadata(run / "pursuer" / "round-002.zip").opponents}
+    assert "exploiter-evader-r001" in weights
+    assert 0.4 <= weights["exploiter-evader-r001"] < 1.0
+    assert sum(weights.values()) == pytest.approx(1.0, abs=1e-3)
 
 
 def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: Path) -> None:

@@ -35,7 +35,8 @@ class SIEncoder(nn.Module):
     def __init__(self, layout: SILayout) -> None:
         super().__init__()
         codec = layout.codec
-        k, m = self.k, self.m = layout.k, layout.m
+        self.k, self.m = layout.k, layout.m
+        k = self.k
         self.own_car, self.opp_car = layout.own.has_heading, layout.opp.has_heading
         self.world = codec.frame == "world"
         half = (codec.half_x, codec.half_y)

@@ -12,7 +12,10 @@ Three ways to draw (``training.selfplay.opponents``):
 ``league``   pfsp, with the scripted players (generation 0) keeping ``floor`` of the draws
              between them whatever their records, so that a learner never forgets them; the floor
              is split among them alike (``split="uniform"``) or by their pfsp weights (``"pfsp"``:
-             most to the scripted players that still beat the learner).
+             most to the scripted players that still beat the learner). The exploiters that joined
+             the pool may keep ``exploiter_share`` of the draws in the same way, split by their pfsp
+             weights (AlphaStar's main agents spend a share of their games on the league's
+             exploiters, evaders of other lineages than their own).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 from pecli.roles import Role
 from pecli.stats import ELO_SCALE
 
+MAIN, EXPLOITER = "main", "exploiter"  # the league's learners: one main and one exploiter per side
 STRATEGIES = ("latest", "uniform", "pfsp", "league")
 FLOOR_SPLITS = ("uniform", "pfsp")
 MIN_SHARE = 0.02  # (ours) pfsp never starves an entry: each keeps >= 2 % of a uniform draw's share
@@ -40,6 +44,12 @@ class PoolEntry:
     generation: int  # 0 for the baselines, r for the learner's checkpoint after round r
     episodes: float = 0.0  # episodes the current learner (decayed over rounds) played against it
     wins: float = 0.0  # of those, how many the entry won
+
+    @property
+    def kind(self) -> str:
+        """Whose checkpoint it is: a league exploiter's (named ``exploiter-<role>-rNNN`` when it joined), else
+        ``main`` (a main learner's, or a scripted player)."""
+        return EXPLOITER if self.name.startswith(f"{EXPLOITER}-") else MAIN
 
     def win_rate(self, prior: float = 0.5, prior_episodes: float = 10.0) -> float:
         """Estimated probability that this entry beats the learner."""
@@ -86,9 +96,10 @@ class OpponentPool:
         prior_episodes: float = 10.0,
         floor: float = 0.0,
         split: str = "uniform",
+        exploiter_share: float = 0.0,
     ) -> np.ndarray:
-        """Draw probabilities of the entries under ``strategy``, ``(entries,)``; ``floor`` and ``split``
-        only for ``league``."""
+        """Draw probabilities of the entries under ``strategy``, ``(entries,)``; ``floor``, ``split`` and
+        ``exploiter_share`` only for ``league``."""
         if not self.entries:
             raise ValueError(f"the {self.role} pool is empty")
         k = len(self.entries)
@@ -98,13 +109,18 @@ class OpponentPool:
             newest = max(e.generation for e in self.entries)
             w = np.array([float(e.generation == newest) for e in self.entries])
         elif strategy == "league":
-            w = self.weights("pfsp", power, priors, prior_episodes)
-            scripted = np.array([e.generation == 0 for e in self.entries], dtype=float)
             if split not in FLOOR_SPLITS:
                 raise ValueError(f"unknown league floor split '{split}' (known: {', '.join(FLOOR_SPLITS)})")
-            if 0 < scripted.sum() < k:
-                share = scripted * w if split == "pfsp" else scripted
-                w = (1.0 - floor) * w + floor * share / share.sum()
+            pfsp = self.weights("pfsp", power, priors, prior_episodes)
+            scripted = np.array([e.generation == 0 for e in self.entries], dtype=float)
+            exploiters = np.array([e.kind == EXPLOITER for e in self.entries], dtype=float)
+            kept, w = 0.0, np.zeros(k)
+            for group, share, by in ((scripted, floor, split), (exploiters, exploiter_share, "pfsp")):
+                if share > 0 and 0 < group.sum() < k:  # a group that is the whole pool keeps its pfsp weights
+                    part = group * pfsp if by == "pfsp" else group
+                    w += share * part / part.sum()
+                    kept += share
+            w += (1.0 - kept) * pfsp
         elif strategy == "pfsp":
             priors = priors or {}
             p = np.array([e.win_rate(priors.get(e.name, 0.5), prior_episodes) for e in self.entries])

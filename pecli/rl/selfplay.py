@@ -52,7 +52,7 @@ from pecli.rl.callbacks import (
     RoundDisplay,
     every_episodes,
 )
-from pecli.rl.pool import OpponentPool, predicted_win_rate
+from pecli.rl.pool import EXPLOITER, MAIN, OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
 from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, play_live, resume_seed
@@ -62,7 +62,6 @@ from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 from wrappers.simultaneous import SimultaneousGame
 
 STATE_FILE = "selfplay.json"
-MAIN, EXPLOITER = "main", "exploiter"  # the league's learners: one main and one exploiter per side
 
 
 class SelfPlayInterrupted(Exception):
@@ -290,7 +289,7 @@ class SelfPlay:
     def _weigher(self, learner: Role) -> Callable[[OpponentPool], np.ndarray]:
         sp, priors = self.settings, self._priors(learner)
         return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
-                                         sp.league_floor_split)
+                                         sp.league_floor_split, sp.league_exploiter_share)
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:

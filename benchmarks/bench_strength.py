@@ -44,7 +44,8 @@ in ``<zoo>/exploit/results.json``. A robust pursuer keeps its capture rate again
 ``compare`` is an A/B of two or more zoos of the same runs (same names: same kind, schedule and seed), e.g. a control
 and a copy trained on with other settings from the same checkpoint: every arm's pursuers play the scripted evaders
 and the evaders of every *other* run of every arm (not their own, nor their twins in the other arms, which share
-their history), so each run meets the same evaders in every arm. It prints each arm's rows, each arm pooled
+their history), so each run meets the same evaders in every arm. When the control (the first arm) has runs that
+the others lack (a fork of some runs only), their evaders join every arm's cross-play as bystanders. It prints each arm's rows, each arm pooled
 against the first (z-test over episodes) and the per-run differences (paired t-test, a run as the unit), and
 how each arm's evaders fare against the other runs' pursuers. Cached in ``--out``.
 
@@ -325,12 +326,17 @@ def compare(args: argparse.Namespace) -> None:
     names = sorted(set.intersection(*(set(runs) for runs in arms.values())))
     if not names:
         sys.exit("the arms have no run in common at that budget (runs pair by name: kind, schedule, seed)")
+    first, *others = arms
+    bystanders = sorted(set(arms[first]) - set(names))  # the control's runs no other arm has: evaders for all
     scenario, of, found = checkpoint_players(
-        [runs[n][role] for runs in arms.values() for n in names for role in ("pursuer", "evader")], args.config)
+        [runs[n][role] for runs in arms.values() for n in names for role in ("pursuer", "evader")]
+        + [arms[first][o]["evader"] for o in bystanders], args.config)
     player = {(label, n, role): of[runs[n][role]] for label, runs in arms.items() for n in names
               for role in ("pursuer", "evader")}
+    player.update({(first, o, "evader"): of[arms[first][o]["evader"]] for o in bystanders})
     scripted, pure, found = with_scripted(found)
-    met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n)] for n in names}
+    met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n), *((first, o) for o in bystanders)]
+           for n in names}
 
     def evader(key: str | tuple[str, str]) -> Player:
         return scripted[key] if isinstance(key, str) else player[(*key, "evader")]
@@ -345,8 +351,9 @@ def compare(args: argparse.Namespace) -> None:
             mine = [results[(player[(label, n, "pursuer")].name, evader(e).name)] for e in met[n]]
             faced[(label, n)] = {e: (r.captures, r.episodes) for e, r in zip(met[n], mine)}
     budget = f"{args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"round {args.round}" if args.round else "the newest round"
+    extra = f" and {first}'s {', '.join(bystanders)}" if bystanders else ""
     print(f"{', '.join(arms)} at {budget}, {args.episodes} games per pairing; cross-play: the other runs' evaders "
-          f"of every arm\n")
+          f"of every arm{extra}\n")
     print(f"| arm | run | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | cross-play | "
           f"its evader: vs pure pursuit / vs the other pursuers | CPU-h |")
     print("| --- | --- | --- | --- | ---: | --- | ---: |")
@@ -362,9 +369,8 @@ def compare(args: argparse.Namespace) -> None:
             print(f"| {label} | {n} | {' / '.join(f'{share([mine[e]]):.2f}' for e in HEURISTIC_EVADERS)} | "
                   f"{' / '.join(f'{share([mine[e]]):.2f}' for e in ADVERSARIES)} | "
                   f"{share([r for e, r in mine.items() if not isinstance(e, str)]):.2f} | "
-                  f"{held.captures / held.episodes:.2f} / {share(against):.2f} | "
+                  f"{held.captures / held.episodes:.2f} / {f'{share(against):.2f}' if against else '—'} | "
                   f"{cpu_hours_to(arms[label][n]['pursuer']):.2f} |")
-    first, *others = arms
     per_run = {label: [share(list(faced[(label, n)].values())) for n in names] for label in arms}
     c0, n0 = (sum(r[i] for n in names for r in faced[(first, n)].values()) for i in (0, 1))
     print(f"\npursuers pooled over every evader they met ({len(names)} runs, {n0} games per arm): {first} {c0 / n0:.3f}")

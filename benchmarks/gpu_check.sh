@@ -3,7 +3,8 @@
 # dependencies installed, or their wheels in .whl/): train with the BiMDN belief on the GPU, resume the run
 # there with a larger budget (replay buffer and belief fitter restored), play the checkpoint on the CPU, export
 # it to ONNX, self-play on the GPU (an alternating round, a simultaneous one, a league with exploiters and join
-# games resumed to a second round, its pursuer played on the CPU), and the speed of training on each device (bench_train.py device).
+# games resumed to a second round, its pursuer played on the CPU), a two-trial Optuna study in two processes, and
+# the speed of training on each device (bench_train.py device).
 # Prints PASS, or FAIL and the failed command; writes its logs to ${OUT:-runs/gpu_check} (relative to the
 # repository's root).
 #   bash benchmarks/gpu_check.sh [steps timed per device, default 8000]
@@ -52,5 +53,8 @@ assert len(exploiters) == 4 and all(t["join_rate"] is not None for t in exploite
 print("league on the GPU: 2 rounds,", len(exploiters), "exploiter turns with join games")
 EOF
 step pecli play --pursuer "$zoo/league/pursuer/round-002.zip" --evader circler -c quick --episodes 50 --seed 0
+step pecli tune pursuer -c quick --trials 2 --jobs 2 --cpu-minutes 0.2 --evaluations 2 --eval-episodes 20 --device cuda \
+    --dir "$zoo/tune"
+test -s "$zoo/tune/quick-pursuer/report.md"
 python3 benchmarks/bench_train.py device --steps "${1:-8000}" | tee "$out/device.md"
 echo PASS

@@ -132,7 +132,7 @@ def _command(what: str, doc: str) -> Any:
         eval_episodes: Annotated[int | None, typer.Option("--eval-episodes", help="Games per opponent and evaluation "
                                                           "(default 200).")] = None,
         jobs: Annotated[int, typer.Option("--jobs", "-j", help="Trials run in parallel processes, one torch thread "
-                                          "each.")] = 1,
+                                          "each; the study may end up to J - 1 trials over --trials.")] = 1,
         storage: StorageOption = None,
         study: Annotated[str | None, typer.Option("--study", help="Study name (default: <config>-<what>).")] = None,
         resume: Annotated[bool, typer.Option("--resume", help="Continue the stored --study (its own settings).")] = False,

@@ -45,9 +45,9 @@ in ``<zoo>/exploit/results.json``. A robust pursuer keeps its capture rate again
 and a copy trained on with other settings from the same checkpoint: every arm's pursuers play the scripted evaders
 and the evaders of every *other* run of every arm (not their own, nor their twins in the other arms, which share
 their history), so each run meets the same evaders in every arm. When the control (the first arm) has runs that
-the others lack (a fork of some runs only), their evaders join every arm's cross-play as bystanders. It prints each arm's rows, each arm pooled
-against the first (z-test over episodes) and the per-run differences (paired t-test, a run as the unit), and
-how each arm's evaders fare against the other runs' pursuers. Cached in ``--out``.
+the others lack (a fork of some runs only), their evaders join every arm's cross-play as bystanders. It prints each
+arm's rows, each arm pooled against the first (z-test over episodes) and the per-run differences (paired t-test, a
+run as the unit), and how each arm's evaders fare against the other runs' pursuers. Cached in ``--out``.
 
 ``behaviour`` is a diagnostic, not a target: how evaders play against one pursuer (caught, seen, how fast they
 move while they see it and while they do not, how far they keep), to tell a lost search from a lost chase.

@@ -1,6 +1,6 @@
 """The opponent pool of self-play: who is in it, how each has fared, and how opponents are drawn.
 
-Three ways to draw (``training.selfplay.opponents``):
+Four ways to draw (``training.selfplay.opponents``):
 
 ``latest``   the newest generation only (the baselines, until a learner has finished a round);
 ``uniform``  every entry alike: fictitious self-play;

@@ -42,7 +42,7 @@ def test_builtin_experiments() -> None:
 
     assert SELFPLAY_STATE == STATE_FILE
     assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
-            "strength-exploiters", "strength-joingames", "strength-share"} <= set(
+            "strength-exploiters", "strength-joingames", "strength-share", "strength-lite"} <= set(
         builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -67,6 +67,9 @@ def test_builtin_experiments() -> None:
     assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (3.0, 200, 3)
     sharing = load_experiment("strength-share").runs()[0].scenario.training.selfplay  # and a share of the games
     assert (sharing.exploiter_join_games, sharing.league_exploiter_share, sharing.league_floor) == (200, 0.25, 0.3)
+    lite = load_experiment("strength-lite").runs()  # strength-small's league with a BiMDN of 64 units
+    assert [r.scenario.training.belief_settings.hidden for r in lite] == [64] * 6
+    assert lite[0].scenario.training.selfplay == small.runs()[0].scenario.training.selfplay
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -67,9 +67,12 @@ def test_builtin_experiments() -> None:
     assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (3.0, 200, 3)
     sharing = load_experiment("strength-share").runs()[0].scenario.training.selfplay  # and a share of the games
     assert (sharing.exploiter_join_games, sharing.league_exploiter_share, sharing.league_floor) == (200, 0.25, 0.3)
-    lite = load_experiment("strength-lite").runs()  # strength-small's league with a BiMDN of 64 units
+    lite = load_experiment("strength-lite").runs()  # strength-small's runs but for a BiMDN of 64 units
     assert [r.scenario.training.belief_settings.hidden for r in lite] == [64] * 6
-    assert lite[0].scenario.training.selfplay == small.runs()[0].scenario.training.selfplay
+    for mine, theirs in zip(lite, small.runs(), strict=True):  # so its `none` runs are strength-small's
+        training = theirs.scenario.training
+        assert mine.name == theirs.name and mine.scenario.fingerprint() == theirs.scenario.fingerprint()
+        assert mine.scenario.training.model_copy(update={"belief_settings": training.belief_settings}) == training
 
 
 @pytest.mark.parametrize(("change", "message"), [

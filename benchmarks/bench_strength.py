@@ -7,6 +7,7 @@
     python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py compare --arms control=ZOO_A exploiters=ZOO_B [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
+    python benchmarks/bench_strength.py fork --run ZOO/RUN --to ZOO [--add corner-sitter ...]
 
 ``train`` trains runs of the ``strength`` experiment (configs/experiments/strength.yaml; ``--experiment
 schedules`` or ``strength-small`` for those, or an experiment file of your own), its grid and budget replaced by
@@ -25,7 +26,7 @@ CPU budget, then the same report::
 
 ``report`` takes each run's newest main checkpoints and plays (``pecli.tournament``, cached in
 ``<zoo>/report``): every final pursuer against greedy, rash, random-walk and pecli's adversaries
-(circler, blindside, wall-runner, hider) and against every other run's final evader (cross-play); every
+(circler, blindside, wall-runner, hider, corner-sitter) and against every other run's final evader (cross-play); every
 final evader against pure pursuit. It prints the issue's targets met or missed, each schedule's pursuers
 pooled over evaders and seeds, and per schedule that has both, the two-proportion z-test of ``bimdn``
 against ``none`` pursuers (same schedule, same CPU) over the evaders that every one of them met: a run never
@@ -49,6 +50,11 @@ the others lack (a fork of some runs only), their evaders join every arm's cross
 arm's rows, each arm pooled against the first (z-test over episodes) and the per-run differences (paired t-test, a
 run as the unit), and how each arm's evaders fare against the other runs' pursuers. Cached in ``--out``.
 
+``fork`` copies a stopped run into another zoo, to train it on as one arm of an A/B whose control is the original
+trained on. ``--add`` puts scripted players into its league pools (each in the pools of the roles it plays, as the
+scripted players a run starts with), so a run started before pecli had them can be tested with them; other
+settings go into the copy's ``config.yaml`` by hand, as ``train`` refuses a run whose settings changed.
+
 ``behaviour`` is a diagnostic, not a target: how evaders play against one pursuer (caught, seen, how fast they
 move while they see it and while they do not, how far they keep), to tell a lost search from a lost chase.
 """
@@ -61,6 +67,7 @@ import dataclasses
 import json
 import os
 import re
+import shutil
 import sys
 from pathlib import Path
 
@@ -78,15 +85,17 @@ from pecli.errors import ConfigError, PecliError  # noqa: E402
 from pecli.io import atomic_write_json, file_digest  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
+from pecli.policies.registry import BUILTINS  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
-from pecli.rl.selfplay import SelfPlayInterrupted  # noqa: E402
+from pecli.rl.pool import OpponentPool  # noqa: E402
+from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted  # noqa: E402
 from pecli.roles import opponent_of  # noqa: E402
 from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
-ADVERSARIES = ("circler", "blindside", "wall-runner", "hider")
+ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league)-s\d+")  # <belief>-<schedule>-s<seed>
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
 
@@ -488,6 +497,34 @@ def exploit(args: argparse.Namespace) -> None:
               f"{done['cpu_seconds'] / 60:.1f} |", flush=True)
 
 
+def fork(args: argparse.Namespace) -> None:
+    """Copy a stopped run to ``--to``, with the scripted players of ``--add`` joining its league pools."""
+    source = args.run
+    target = args.to / source.name
+    state_path = source / STATE_FILE
+    if not state_path.is_file():
+        sys.exit(f"{source}: not a self-play run (no {STATE_FILE})")
+    if target.exists():
+        sys.exit(f"{target} exists: fork to another --to")
+    state = json.loads(state_path.read_text())
+    pools = {role: OpponentPool.from_dict(data) for role, data in state["pools"].items()}
+    for name in args.add:
+        if name not in BUILTINS:
+            sys.exit(f"--add {name}: not a scripted player ({', '.join(BUILTINS)})")
+        for role in BUILTINS[name].roles:
+            if any(entry.name == name for entry in pools[role].entries):
+                sys.exit(f"{source.name}: its {role} pool already holds {name}")
+            pools[role].add(name, name, generation=0)
+    args.to.mkdir(parents=True, exist_ok=True)
+    partial = args.to / f".{source.name}.partial"
+    shutil.rmtree(partial, ignore_errors=True)
+    shutil.copytree(source, partial, symlinks=True)
+    atomic_write_json(partial / STATE_FILE, {**state, "pools": {role: pool.to_dict() for role, pool in pools.items()}})
+    partial.rename(target)  # the fork appears whole or not at all
+    added = f", with {', '.join(args.add)} in its pools" if args.add else ""
+    print(f"{target}: a copy of {source} at {run_cpu_hours(target):.2f} CPU-h{added}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -544,8 +581,14 @@ def main() -> None:
                     help="compare every run at this CPU budget (default: each run's newest round)")
     at.add_argument("--round", type=int, default=None,
                     help="compare every run after this many rounds (equal transitions per main learner, not CPU)")
+    branch = sub.add_parser("fork")
+    branch.add_argument("--run", type=Path, required=True, help="the run folder to copy (stopped)")
+    branch.add_argument("--to", type=Path, required=True, help="the zoo the copy goes into")
+    branch.add_argument("--add", nargs="+", default=[], help="scripted players that join the copy's pools")
     args = parser.parse_args()
-    {"train": train, "report": report, "exploit": exploit, "compare": compare, "behaviour": behaviour}[args.what](args)
+    commands = {"train": train, "report": report, "exploit": exploit, "compare": compare, "behaviour": behaviour,
+                "fork": fork}
+    commands[args.what](args)
 
 
 if __name__ == "__main__":

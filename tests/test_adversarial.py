@@ -11,7 +11,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.adversarial import Interceptor, WallRunner
 from pecli.scenario import Scenario
 
-EVADERS = ["circler", "blindside", "wall-runner", "hider"]
+EVADERS = ["circler", "blindside", "wall-runner", "hider", "corner-sitter"]
 
 
 @pytest.mark.parametrize("scenario", all_scenarios(), ids=lambda s: f"{s.name}-{s.observation_frame}")
@@ -98,6 +98,29 @@ def test_the_hider_goes_far_behind_the_car_remembers_its_spot_and_keeps_still(pa
     assert np.allclose(hider.act(there["evader"]), 0.0)  # at its spot: keeps still
     close = car_and_mass(paper, car, (1.5, 0.0, 0.0, 0.0))  # within 2 m: flees like greedy
     assert np.allclose(hider.act(close["evader"]), acceleration("greedy", paper, close))
+
+
+def test_the_corner_sitter_keeps_still_in_a_corner_and_steps_past_a_car_that_comes_for_it(paper: Scenario) -> None:
+    hx, hy = paper.arena.half
+    sitter = resolve_policy("corner-sitter", "evader", paper, seed=0)
+    sitter.reset(1)
+    far = car_and_mass(paper, (-7.0, -7.0, 0.0, 2.0, 0.0), (1.0, 2.0, 0.0, 0.0))  # out of its sensor's 6 m
+    action = sitter.act(far["evader"])[0]
+    corner = sitter.corner[0].copy()
+    assert np.allclose(np.abs(corner), [hx, hy])  # a corner drawn at random
+    assert np.dot(action, corner - np.array([1.0, 2.0])) > 0  # on its way there
+    there = car_and_mass(paper, (-7.0, -7.0, 0.0, 2.0, 0.0), (*corner, 0.0, 0.0))
+    assert np.allclose(sitter.act(there["evader"]), 0.0)  # in its corner: keeps still
+    sitter.reset(1)
+    seen = car_and_mass(paper, (-2.0, 3.0, 0.0, 2.0, 0.0), (0.0, 0.0, 0.0, 0.0))  # sees the car at the start
+    sitter.act(seen["evader"])
+    assert np.allclose(sitter.corner[0], [hx, -hy])  # the corner farthest from it
+    yaw = np.pi / 4  # the car drives into the sitter's corner, 2.8 m away, the sitter in the middle of its wedge
+    coming = car_and_mass(paper, (hx - 2.0, hy - 2.0, 0.0, 2.0, yaw), (hx, hy, 0.0, 0.0))
+    action = sitter.act(coming["evader"])[0]
+    assert np.allclose(sitter.corner[0], [-hx, -hy])  # now bound for the corner farthest from the car
+    assert action[0] < -0.5 and action[1] > 0  # out of the wedge sideways, along the wall and past the car
+    assert np.allclose(action, acceleration("blindside", paper, coming))  # the blindside's way out of the wedge
 
 
 def test_the_interceptor_leads_a_moving_evader(paper: Scenario) -> None:

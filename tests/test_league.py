@@ -19,6 +19,7 @@ from pecli.roles import opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import read_metadata
 
+ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")  # pecli's evaders, in every league
 TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
         "checkpoint_every": 5, "selfplay.rounds": 2, "selfplay.steps_per_round": 240, "selfplay.opponents": "league",
         "selfplay.exploiter_join": 0.05}
@@ -121,7 +122,7 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
     turns, pools = state(run)["turns"], state(run)["pools"]
     assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
         (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter") for role in ("pursuer", "evader")]
-    assert {"circler", "blindside", "wall-runner", "hider"} <= {e["name"] for e in pools["evader"]["entries"]}
+    assert set(ADVERSARIES) <= {e["name"] for e in pools["evader"]["entries"]}
     assert "interceptor" in {e["name"] for e in pools["pursuer"]["entries"]}
     for t in (t for t in turns if t["learner"] == "exploiter"):
         meta = read_metadata(run / t["checkpoint"])
@@ -159,7 +160,7 @@ def test_the_exploiters_train_every_kth_round_once_the_run_spent_its_cpu_or_neve
         (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter")[:1 + (r in exploited)]
         for role in ("pursuer", "evader") if kind == "main" or role in roles]
     assert (run / "exploiter-pursuer").is_dir() == (bool(exploited) and "pursuer" in roles)
-    assert {"circler", "blindside", "wall-runner", "hider"} <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
+    assert set(ADVERSARIES) <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
     assert all(learner.curriculum is not None for learner in loop.learners.values())  # quick.yaml has one
     assert all(learner.curriculum is None for learner in loop.exploiters.values())
 

@@ -17,13 +17,19 @@ paper's; they are opponents in training and rows in the benchmarks (docs/adversa
   sees the pursuer, the hider picks a hiding spot (of a grid 1 m inside the walls) far from the
   pursuer and behind its heading, reached by a path that stays out of the pursuer's sight, goes there
   and keeps still; a pursuer within 2 m makes it flee like greedy.
+* ``corner-sitter`` (evader): a corner is the last place a car's wedge reaches, and a car that drives into
+  one is stuck against two walls. The corner-sitter keeps still in a corner (one at random, or the one
+  farthest from the pursuer if it sees it at the start); a pursuer seen within 3 m makes it step out of
+  the car's wedge sideways, past it, and run for the corner farthest from it. The learned evaders of
+  ``strength-small`` found this on their own (docs/adversaries.md).
 * ``interceptor`` (pursuer): aims where the evader will be (lead pursuit on the evader's seen
   velocity), goes to where a lost evader should be by now, and otherwise sweeps the arena along a
   fixed tour instead of walking randomly.
 
 Against a point-mass pursuer (no turning circle, no blind side) the circler and the blindside flee
 like the greedy evader; the hider still hides (a point mass's sensor is a disk, so "behind it" is no
-better than elsewhere). Every player reads only its own observation, like every other policy.
+better than elsewhere) and the corner-sitter runs for the far corner without stepping aside. Every
+player reads only its own observation, like every other policy.
 """
 
 from __future__ import annotations
@@ -81,6 +87,16 @@ class _Evader(HeuristicPolicy):
         wanted = np.clip(wanted, -self.params.v_max, self.params.v_max)
         return velocity_command(view, wanted, self.params, self.scenario.dt)
 
+    def _wedge_exit(self, view: Decoded, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whether the evader is inside the car's wedge (with a margin of 20 degrees), ``(n,)``, and the way out of
+        it ``(n, 2)``: sideways, to the side it is on, and a little back."""
+        rel = view.own_pos - view.opp_pos
+        bearing_cos = np.einsum("ij,ij->i", heading, rel) / np.maximum(np.linalg.norm(rel, axis=1), 1e-9)
+        inside = bearing_cos >= np.cos(0.5 * self.scenario.pursuer.sensor.fov + 0.35)
+        left = np.stack([-heading[:, 1], heading[:, 0]], axis=1)
+        side = np.where(np.einsum("ij,ij->i", left, rel) >= 0, 1.0, -1.0)
+        return inside, side[:, None] * left - 0.5 * heading
+
     def _run(self, view: Decoded, direction: np.ndarray) -> np.ndarray:
         """Actions at full speed along ``direction`` ``(n, 2)``; standing still where it is zero."""
         if isinstance(self.params, CarAgent):
@@ -128,14 +144,9 @@ class Blindside(_Evader):
         if not self.pursuer_is_car:
             return actions
         heading = self._pursuer_heading(view)
-        half_fov = 0.5 * self.scenario.pursuer.sensor.fov
         rel = view.own_pos - view.opp_pos
         distance = np.linalg.norm(rel, axis=1)
-        bearing_cos = np.einsum("ij,ij->i", heading, rel) / np.maximum(distance, 1e-9)
-        inside = bearing_cos >= np.cos(half_fov + 0.35)  # in the wedge, with a margin of 20 degrees
-        left = np.stack([-heading[:, 1], heading[:, 0]], axis=1)
-        side = np.where(np.einsum("ij,ij->i", left, rel) >= 0, 1.0, -1.0)
-        sidestep = side[:, None] * left - 0.5 * heading  # out of the wedge, sideways and a little back
+        inside, sidestep = self._wedge_exit(view, heading)
         follow = self._go(view, view.opp_pos - self.behind * heading, carry=view.opp_vel)
         leave = self._run(view, sidestep)
         known = view.seen & np.any(heading != 0.0, axis=1)
@@ -240,6 +251,39 @@ class Hider(_Evader):
         sighted = (gap <= sensor.range) & (in_wedge | ~known) | (gap < self.clearance)
         score = distance + self.behind_weight * (1.0 - ahead) - self.sight_weight * sensor.range * sighted.mean(axis=2)
         return self.spots[np.argmax(score, axis=1)]
+
+
+class CornerSitter(_Evader):
+    """Keeps still in a corner; steps past a car that comes for it and runs for the farthest corner (see the module)."""
+
+    name = "corner-sitter"
+    alert = 3.0  # m: a seen pursuer nearer than this makes it leave for the corner farthest from it
+
+    def _allocate(self, n: int) -> None:
+        super()._allocate(n)
+        hx, hy = self.scenario.arena.half
+        self.corners = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+        self.corner = np.full((n, 2), np.nan)  # the corner it goes to or sits in, per game; NaN: a new game
+
+    def _restart(self, mask: np.ndarray) -> None:
+        super()._restart(mask)
+        self.corner[mask] = np.nan
+
+    def _act(self, view: Decoded) -> np.ndarray:
+        heading = self._pursuer_heading(view)
+        distance = np.linalg.norm(view.own_pos - view.opp_pos, axis=1)
+        fresh = np.isnan(self.corner[:, 0])
+        blind = fresh & ~view.seen
+        self.corner[blind] = self.corners[self.rng.integers(len(self.corners), size=int(blind.sum()))]
+        leave = view.seen & (fresh | (distance < self.alert))
+        farthest = np.argmax(np.linalg.norm(self.corners[None] - view.opp_pos[:, None], axis=2), axis=1)
+        self.corner[leave] = self.corners[farthest[leave]]
+        actions = self._go(view, self.corner)
+        if self.pursuer_is_car:
+            inside, sidestep = self._wedge_exit(view, heading)
+            dodge = leave & inside
+            actions[dodge] = self._run(view, sidestep)[dodge]
+        return actions
 
 
 class Interceptor(HeuristicPolicy):

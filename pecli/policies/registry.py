@@ -4,7 +4,7 @@ A policy string is one of:
 
 * a built-in name: the paper's ``pure-pursuit`` (pursuer), ``greedy``, ``rash`` (evaders), ``random-walk``
   (either); pecli's adversaries ``interceptor`` (pursuer), ``circler``, ``blindside``, ``wall-runner``,
-  ``hider`` (evaders, :mod:`pecli.policies.adversarial`);
+  ``hider``, ``corner-sitter`` (evaders, :mod:`pecli.policies.adversarial`);
 * a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
   ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
@@ -22,13 +22,14 @@ from pathlib import Path
 
 from pecli.errors import PecliError, PolicyError
 from pecli.policies.base import HeuristicPolicy, Policy
-from pecli.policies.adversarial import Blindside, Circler, Hider, Interceptor, WallRunner
+from pecli.policies.adversarial import Blindside, Circler, CornerSitter, Hider, Interceptor, WallRunner
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
 from pecli.roles import Role
 from pecli.scenario import Scenario
 
 BUILTINS: dict[str, type[HeuristicPolicy]] = {
-    cls.name: cls for cls in (PurePursuit, Greedy, RandomWalk, Rash, Interceptor, Circler, Blindside, WallRunner, Hider)
+    cls.name: cls
+    for cls in (PurePursuit, Greedy, RandomWalk, Rash, Interceptor, Circler, Blindside, WallRunner, Hider, CornerSitter)
 }
 PAPER_BASELINES = ("pure-pursuit", "greedy", "random-walk", "rash")  # the rest are pecli's adversaries
 

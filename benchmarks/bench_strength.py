@@ -86,7 +86,7 @@ from pecli.io import atomic_write_json, file_digest  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
 from pecli.policies.registry import BUILTINS  # noqa: E402
-from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path  # noqa: E402
+from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.rl.pool import OpponentPool  # noqa: E402
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted  # noqa: E402
 from pecli.roles import opponent_of  # noqa: E402
@@ -113,7 +113,7 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     beliefs, seeds, CPU budget and scenario given."""
     try:
         path = experiment_path(args.experiment)
-        data = read_yaml(path)
+        data = read_experiment(path)
         experiment_from_dict(copy.deepcopy(data), str(path), base=path.parent)  # the file as written is valid
         if args.config is not None:
             data["scenario"] = args.config

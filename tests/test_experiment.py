@@ -102,6 +102,41 @@ def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, messag
     assert "\n" not in str(info.value)
 
 
+def test_an_experiment_extends_another_key_by_key(tmp_path: Path) -> None:
+    from pecli.scenario import builtin_config_dir
+
+    mine = tmp_path / "mine.yaml"  # a built-in, one nested setting changed, the seeds replaced whole
+    mine.write_text(yaml.safe_dump({"name": "mine", "extends": "strength-small", "runs": {"seeds": [7]},
+                                    "training": {"selfplay": {"league_floor": 0.5}}}))
+    loaded, small = load_experiment(mine), load_experiment("strength-small")
+    assert loaded.spec.name == "mine" and loaded.spec.description == ""  # the name is its own; no description
+    assert [(r.kind, r.seed) for r in loaded.runs()] == [("none", 7), ("bimdn", 7)]
+    league = loaded.runs()[0].scenario.training.selfplay
+    assert (league.league_floor, league.league_floor_split, league.league_exploiter_every) == (0.5, "pfsp", 0)
+    assert loaded.spec.tournament == small.spec.tournament and loaded.spec.runs.cpu_hours == small.spec.runs.cpu_hours
+    folder = tmp_path / "games"  # a file of the user's, its scenario file beside it, extended from elsewhere
+    folder.mkdir()
+    (folder / "game.yaml").write_text((builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150",
+                                                                                               "horizon: 120"))
+    (folder / "base.yaml").write_text(yaml.safe_dump({**SMOKE, "scenario": "game.yaml"}))
+    (tmp_path / "top.yaml").write_text(yaml.safe_dump({"name": "top", "extends": "games/base.yaml"}))
+    assert load_experiment(tmp_path / "top.yaml").runs()[0].scenario.horizon == 120
+
+
+@pytest.mark.parametrize(("top", "message"), [
+    ({"extends": "strength-small"}, "needs a name of its own"),
+    ({"name": "x", "extends": "nothing-such"}, "extends: experiment not found: nothing-such"),
+    ({"name": "x", "extends": ["strength-small"]}, "extends: give the experiment it starts from"),
+    ({"name": "x", "extends": "exp.yaml"}, "a loop"),
+    ({"name": "x", "extends": "strength-small", "runs": {"kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
+])
+def test_a_bad_extends_gives_one_line(tmp_path: Path, top: dict, message: str) -> None:
+    path = write(tmp_path, top)
+    with pytest.raises(ConfigError) as info:
+        load_experiment(path)
+    assert str(info.value).startswith(f"{path}: ") and message in str(info.value) and "\n" not in str(info.value)
+
+
 def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path) -> None:
     import torch as th
 

@@ -15,6 +15,11 @@ tournament and which of the paper's tables to report.
     tournament: {episodes: 500, seeds: 1, baselines: true, players: []}
     report: {table: I}
 
+An experiment can start from another: ``extends: strength-small`` (a built-in name, or a YAML file relative to
+this one) takes that experiment's keys, and the ones given here replace them; mappings merge key by key (so
+``training: {selfplay: {league_exploiter_share: 0.25}}`` changes one setting), anything else (lists included) is
+replaced whole. ``name`` must be given anew, and ``description`` is not inherited.
+
 :func:`load_experiment` validates it into an :class:`Experiment`: unknown keys, wrong types, unknown
 belief kinds and empty grids are refused in one line naming the file and the key.
 """
@@ -56,6 +61,7 @@ SELFPLAY_SETTINGS: dict[str, dict[str, object]] = {
 assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-defined]
 
 
+MAX_EXTENDS = 8  # experiments one file may stack with ``extends``
 MAX_SEED = 2**32 - 1  # what NumPy and SB3 take as a seed
 MAX_SEEDS = 1000  # seeds of a ranking or tournament pairing
 
@@ -284,7 +290,46 @@ def experiment_path(name_or_path: str | Path) -> Path:
     return path
 
 
+def read_experiment(path: Path, _chain: tuple[Path, ...] = ()) -> dict:
+    """The experiment file at ``path`` as a mapping, with the experiment it ``extends`` (if any) merged under it."""
+    data = read_yaml(path)
+    if not isinstance(data, dict) or "extends" not in data:
+        return data
+    data = dict(data)
+    ref = data.pop("extends")
+    if not isinstance(ref, str) or not ref.strip():
+        raise ConfigError(f"{path}: extends: give the experiment it starts from (a built-in name or a YAML file)")
+    if "name" not in data:
+        raise ConfigError(f"{path}: an experiment that extends another needs a name of its own")
+    chain = (*_chain, path.resolve())
+    if len(chain) > MAX_EXTENDS:
+        raise ConfigError(f"{path}: extends: more than {MAX_EXTENDS} experiments stacked")
+    relative = path.parent / ref
+    try:
+        base_path = relative if relative.is_file() else experiment_path(ref)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: extends: {exc}") from None
+    if base_path.resolve() in chain:
+        raise ConfigError(f"{path}: extends: {ref} extends this file in turn (a loop)")
+    base = read_experiment(base_path, chain)
+    if not isinstance(base, dict):
+        raise ConfigError(f"{base_path}: an experiment must be a mapping of keys to values")
+    base.pop("description", None)
+    scenario = base.get("scenario")
+    if isinstance(scenario, str) and (base_path.parent / scenario).is_file():  # a scenario file of the base's own
+        base["scenario"] = str((base_path.parent / scenario).resolve())
+    return _merged(base, data)
+
+
+def _merged(base: dict, top: dict) -> dict:
+    """``base`` with ``top``'s keys: mappings merged key by key, anything else replaced."""
+    out = dict(base)
+    for key, value in top.items():
+        out[key] = _merged(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
 def load_experiment(name_or_path: str | Path) -> LoadedExperiment:
     """Read and validate an experiment from a YAML file or a built-in name (:func:`builtin_experiments`)."""
     path = experiment_path(name_or_path)
-    return experiment_from_dict(read_yaml(path), str(path), base=path.parent)
+    return experiment_from_dict(read_experiment(path), str(path), base=path.parent)

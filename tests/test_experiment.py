@@ -235,6 +235,19 @@ def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
     assert not (tmp_path / "zero" / "experiment.json").exists()  # refused before anything is recorded
 
 
+def test_cli_shows_an_experiment_as_it_will_run(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["experiment", "show", "strength-share"])  # extends strength-joingames, which extends
+    assert result.exit_code == 0, result.output                            # strength-small
+    shown = yaml.safe_load(result.output[:result.output.index("fingerprint ")])
+    assert shown["name"] == "strength-share" and "extends" not in shown
+    assert shown["training"]["selfplay"]["league_exploiter_share"] == 0.25  # its own
+    assert shown["training"]["selfplay"]["exploiter_join_games"] == 200  # strength-joingames'
+    assert shown["training"]["selfplay"]["league_floor"] == 0.3  # strength-small's
+    assert f"fingerprint {load_experiment('strength-share').spec.fingerprint()}; 6 runs: none-league-s0" in result.output
+    result = runner.invoke(app, ["experiment", "show", str(write(tmp_path, {"extends": "strength-small"}))])
+    assert result.exit_code == 1 and result.output.strip().count("\n") == 0 and "a name of its own" in result.output
+
+
 def test_one_driver_per_out_folder(tmp_path: Path) -> None:
     """Another process writing --out (an OS lock, whatever its PID record says) refuses a second driver."""
     out = tmp_path / "out"

@@ -1,4 +1,4 @@
-"""``pecli experiment run|status|report``: a whole reproduction (train, rank, tournament, report) from one
+"""``pecli experiment run|show|status|report``: a whole reproduction (train, rank, tournament, report) from one
 experiment file, executed on Ray."""
 
 from __future__ import annotations
@@ -169,6 +169,23 @@ def run(
         return
     _print_report(out)
     err_console.print(f"wrote {report}, {out / 'report.json'}, {out / 'table.png'}", highlight=False)
+
+
+@app.command()
+@user_errors
+def show(
+    experiment: Annotated[str, typer.Argument(help=f"A built-in experiment ({', '.join(builtin_experiments())}) "
+                                              "or a YAML file.", show_default=False)],
+) -> None:
+    """Print an experiment as it will run (a base it extends merged in), its fingerprint and its runs; trains nothing."""
+    import yaml
+
+    from pecli.experiment import load_experiment
+
+    loaded = load_experiment(experiment)
+    typer.echo(yaml.safe_dump(loaded.spec.model_dump(mode="json"), sort_keys=False, width=120), nl=False)
+    runs = loaded.runs()
+    typer.echo(f"fingerprint {loaded.spec.fingerprint()}; {len(runs)} runs: {', '.join(r.name for r in runs)}")
 
 
 @app.command()

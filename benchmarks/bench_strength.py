@@ -3,7 +3,7 @@
     python benchmarks/bench_strength.py train [--experiment strength|strength-small|schedules|FILE] \\
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
-    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N]
+    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N] [--average K]
     python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py compare --arms control=ZOO_A exploiters=ZOO_B [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
@@ -36,6 +36,8 @@ over the runs' own rates takes the training seed as the unit (wider spread, the 
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
+``--average K`` plays each run's pursuer as the mean of its weights over the K rounds ending at the round read
+(``pecli zoo average``; the evaders stay the round's own).
 
 ``exploit`` measures how exploitable each run's final pursuer (``--role evader``: evader) is, which no target of
 the issue asks but cross-play hints at: a fresh ``none`` learner of the other side trains against it alone (TD3,
@@ -87,6 +89,7 @@ from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
 from pecli.policies.registry import BUILTINS  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
+from pecli.rl.averaging import average_checkpoints  # noqa: E402
 from pecli.rl.pool import OpponentPool  # noqa: E402
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted  # noqa: E402
 from pecli.roles import opponent_of  # noqa: E402
@@ -146,10 +149,13 @@ def train(args: argparse.Namespace) -> None:
               f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
 
 
-def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None) -> dict[str, dict[str, Path]]:
+def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None,
+                  average: int = 1) -> dict[str, dict[str, Path]]:
     """Each run's main checkpoint per role, ``{run: {role: path}}``: those of its newest round, of round
     ``at_round``, or with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where
-    a run of that budget would have stopped). A run not there yet is left out, and said so."""
+    a run of that budget would have stopped). A run not there yet is left out, and said so. With ``average``
+    k > 1 the pursuer is the mean of the main pursuer's weights over the k rounds ending there (written once to
+    ``<zoo>/report/average``)."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
         name = state.parent.name
@@ -171,6 +177,16 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
             print(f"{name}: left out, {where} so far", file=sys.stderr)
             continue
         runs[name] = {role: main[(chosen[0], role)] for role in ("pursuer", "evader")}
+        if average > 1:
+            rounds = [r for r in sorted(r for r, role in main if role == "pursuer") if r <= chosen[0]][-average:]
+            if len(rounds) < average:
+                print(f"{name}: left out, {len(rounds)} rounds to average, not {average}", file=sys.stderr)
+                del runs[name]
+                continue
+            out = zoo / "report" / "average" / f"{name}-pursuer-{rounds[0]:03d}-{rounds[-1]:03d}.zip"
+            if not out.is_file():
+                average_checkpoints([main[(r, "pursuer")] for r in rounds], out)
+            runs[name]["pursuer"] = out
     if not runs:
         sys.exit(f"no self-play run under {zoo} has the rounds asked for: run `train` first, or ask for fewer")
     return runs
@@ -244,7 +260,7 @@ def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Pl
 
 
 def report(args: argparse.Namespace) -> None:
-    runs = final_players(args.zoo, args.cpu_hours, args.round)
+    runs = final_players(args.zoo, args.cpu_hours, args.round, args.average)
     scenario, of, found = checkpoint_players([p for latest in runs.values() for p in latest.values()], args.config)
     pursuers = {name: of[latest["pursuer"]] for name, latest in runs.items()}
     evaders = {name: of[latest["evader"]] for name, latest in runs.items()}
@@ -276,10 +292,10 @@ def report(args: argparse.Namespace) -> None:
         cross = [faced[name][o] for o in others]
         held = rate(pure, evaders[name])
         cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
-        print(f"| {name} | {runs[name]['pursuer'].stem.split('-')[-1].lstrip('0')} | "
+        print(f"| {name} | {runs[name]['evader'].stem.split('-')[-1].lstrip('0')} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
-              f"{cpu_hours_to(runs[name]['pursuer']):.2f} |")
+              f"{cpu_hours_to(runs[name]['evader']):.2f} |")  # the round's (the pursuer may be an average)
         missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
                    if c / n < TARGETS["heuristics"]]
         missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
@@ -311,7 +327,7 @@ def report(args: argparse.Namespace) -> None:
         (cb, nb), (cn, nn) = pool(faced, bimdn, common), pool(faced, none, common)
         p = two_proportion_z_test(cb, nb, cn, nn)
         better = cb / nb > cn / nn and p < 0.05
-        hours = {kind: sum(cpu_hours_to(runs[name]["pursuer"]) for name in names) / len(names)
+        hours = {kind: sum(cpu_hours_to(runs[name]["evader"]) for name in names) / len(names)
                  for kind, names in (("bimdn", bimdn), ("none", none))}
         print(f"\n{schedule}: bimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} over the {len(common)} evaders every "
               f"one of them met ({', '.join(sorted(common))}) and every seed, at {hours['bimdn']:.2f} and "
@@ -576,6 +592,9 @@ def main() -> None:
                                       "(default: the experiment's)")
     sub.choices["report"].add_argument("--episodes", type=int, default=500)
     sub.choices["report"].add_argument("--workers", type=int, default=2)
+    sub.choices["report"].add_argument("--average", type=int, default=1, metavar="K",
+                                       help="each run's pursuer: the mean of its weights over the last K rounds "
+                                       "(pecli zoo average) instead of the last round's")
     at = sub.choices["report"].add_mutually_exclusive_group()
     at.add_argument("--cpu-hours", type=float, default=None,
                     help="compare every run at this CPU budget (default: each run's newest round)")

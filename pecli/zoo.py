@@ -81,6 +81,7 @@ class CheckpointMeta:
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
     policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.rl.algorithms.policy_kwargs: rebuilds the network
     belief_kwargs: dict[str, Any] | None = None  # the actor's BeliefModel arguments, with a belief
+    averaged: list[str] = field(default_factory=list)  # pecli zoo average: the checkpoints it is the mean of
     pecli_version: str = __version__
     created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
 
@@ -98,6 +99,8 @@ class CheckpointMeta:
                 raise ValueError(f"{name} must be a string, not {getattr(self, name)!r}")
         if not isinstance(self.policy_kwargs, dict) or not isinstance(self.belief_kwargs, dict | None):
             raise ValueError("policy_kwargs and belief_kwargs must be JSON objects")
+        if not isinstance(self.averaged, list) or not all(isinstance(p, str) for p in self.averaged):
+            raise ValueError("averaged must be a list of checkpoint paths")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -147,3 +147,38 @@ def test_show_refuses_a_zip_that_is_not_a_checkpoint(zoo: Path, tmp_path: Path) 
     assert result.exit_code == 1 and "not a pecli checkpoint (no 'data' in the zip" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert invoke("zoo", "show", str(zoo / "p" / "pursuer" / "final.zip")).exit_code == 0
+
+
+def test_average_writes_the_mean_of_a_runs_checkpoints(zoo: Path, tmp_path: Path, quick) -> None:
+    from pecli.game import Game
+    from pecli.policies import resolve_policy
+    from pecli.rl.checkpoint import read_weights
+    from pecli.zoo import read_metadata
+
+    trained = zoo / "p" / "pursuer"
+    rounds = tmp_path / "run" / "pursuer"  # two checkpoints of one learner, named like a self-play run's rounds
+    rounds.mkdir(parents=True)
+    for name, source in (("round-001", sorted(trained.glob("ep*.zip"))[0].stem), ("round-002", "final")):
+        for suffix in (".zip", ".json"):
+            shutil.copy(trained / f"{source}{suffix}", rounds / f"{name}{suffix}")
+    result = invoke("zoo", "average", str(rounds), "--last", "2")
+    assert result.exit_code == 0, result.output
+    out = rounds / "average-001-002.zip"
+    a, b, mean = (read_weights(path)[0]["policy"] for path in (rounds / "round-001.zip", rounds / "round-002.zip", out))
+    key = next(k for k in mean if k.startswith("actor.") and mean[k].is_floating_point())
+    assert not a[key].equal(b[key]) and mean[key].allclose((a[key] + b[key]) / 2)
+    meta = read_metadata(out)
+    assert meta.averaged == [str(rounds / "round-001.zip"), str(rounds / "round-002.zip")] and meta.role == "pursuer"
+    policy = resolve_policy(str(out), "pursuer", quick, seed=0)  # it plays like any checkpoint
+    assert policy.act(Game(quick, n=2, seed=0).reset()["pursuer"]).shape == (2, 2)
+
+
+def test_average_refuses_checkpoints_of_different_networks(zoo: Path, tmp_path: Path) -> None:
+    p, e = zoo / "p" / "pursuer" / "final.zip", zoo / "e" / "evader" / "final.zip"
+    result = invoke("zoo", "average", str(p), str(e), "--out", str(tmp_path / "mix.zip"))
+    assert result.exit_code == 1 and "its role differs" in result.output and result.output.strip().count("\n") == 0
+    result = invoke("zoo", "average", str(p), str(p))
+    assert result.exit_code == 1 and "give --out" in result.output
+    result = invoke("zoo", "average", str(zoo / "p" / "pursuer"), "--last", "50")
+    assert result.exit_code == 1 and "fewer than --last 50" in result.output
+    assert not (tmp_path / "mix.zip").exists()

@@ -1,4 +1,4 @@
-"""``pecli zoo``: list, show, remove and pick checkpoints of a zoo."""
+"""``pecli zoo``: list, show, remove, pick and average checkpoints of a zoo."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from pecli.scenario import Scenario
     from pecli.zoo import CheckpointMeta
 
-app = typer.Typer(help="List, show, remove and pick checkpoints of a zoo.", no_args_is_help=True)
+app = typer.Typer(help="List, show, remove, pick and average checkpoints of a zoo.", no_args_is_help=True)
 
 ZooArgument = Annotated[Path, typer.Argument(help="The zoo folder (or one run folder).")]
 
@@ -161,3 +161,42 @@ def best(
             return
         err_console.print(f"[yellow]skipped[/] {path}: {problem}", highlight=False, soft_wrap=True)
     raise PecliError(f"every rated {role} checkpoint in {zoo} is damaged: train or copy them again")
+
+
+@app.command("average")
+@user_errors
+def average(
+    checkpoints: Annotated[list[Path], typer.Argument(
+        help="Checkpoints of one network, oldest first; or one folder of a run's rounds (e.g. RUN/pursuer).",
+        show_default=False)],
+    last: Annotated[int, typer.Option("--last", min=1, help="With a folder: average its newest N rounds.")] = 10,
+    out: Annotated[Path | None, typer.Option("--out", help="The checkpoint to write (default, with a folder: "
+                                             "FOLDER/average-rA-rB.zip).")] = None,
+) -> None:
+    """Write a checkpoint whose weights are the mean of CHECKPOINTS' (weight averaging over a run's last rounds).
+
+    A self-play learner's policy moves from round to round; the mean of its last rounds' weights plays more
+    robustly than any one of them, at no training cost (docs/benchmarks.md). The result plays like any checkpoint.
+    """
+    from pecli.rl.averaging import average_checkpoints
+
+    if len(checkpoints) == 1 and checkpoints[0].is_dir():
+        folder = checkpoints[0]
+        rounds = sorted(folder.glob("round-*.zip"))
+        if len(rounds) < last:
+            raise PecliError(f"{folder}: {len(rounds)} round checkpoints, fewer than --last {last}")
+        checkpoints = rounds[-last:]
+        first, newest = (path.stem.removeprefix("round-") for path in (checkpoints[0], checkpoints[-1]))
+        out = out or folder / f"average-{first}-{newest}.zip"
+    if out is None:
+        raise PecliError("give --out: the checkpoint to write")
+    if out.suffix != ".zip":
+        raise PecliError(f"--out {out}: a checkpoint is a .zip file")
+    if any(out.resolve() == path.resolve() for path in checkpoints):
+        raise PecliError(f"--out {out} is one of the checkpoints averaged")
+    for path in checkpoints:
+        if not path.is_file():
+            raise PecliError(f"no checkpoint at {path}")
+    meta = average_checkpoints(checkpoints, out)
+    err_console.print(f"wrote {out}: the mean of {len(checkpoints)} {meta.role} checkpoints "
+                      f"({checkpoints[0].name} .. {checkpoints[-1].name})", highlight=False)

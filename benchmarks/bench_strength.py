@@ -185,7 +185,10 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
                 continue
             out = zoo / "report" / "average" / f"{name}-pursuer-{rounds[0]:03d}-{rounds[-1]:03d}.zip"
             if not out.is_file():
-                average_checkpoints([main[(r, "pursuer")] for r in rounds], out)
+                try:
+                    average_checkpoints([main[(r, "pursuer")] for r in rounds], out)
+                except PecliError as error:  # checkpoints of another network (a run resumed with other settings)
+                    sys.exit(f"{name}: cannot average its pursuers: {error}")
             runs[name]["pursuer"] = out
     if not runs:
         sys.exit(f"no self-play run under {zoo} has the rounds asked for: run `train` first, or ask for fewer")

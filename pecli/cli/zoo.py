@@ -171,7 +171,7 @@ def average(
         show_default=False)],
     last: Annotated[int, typer.Option("--last", min=1, help="With a folder: average its newest N rounds.")] = 10,
     out: Annotated[Path | None, typer.Option("--out", help="The checkpoint to write (default, with a folder: "
-                                             "FOLDER/average-rA-rB.zip).")] = None,
+                                             "FOLDER/average-A-B.zip, A and B its first and last round).")] = None,
 ) -> None:
     """Write a checkpoint whose weights are the mean of CHECKPOINTS' (weight averaging over a run's last rounds).
 

@@ -290,8 +290,9 @@ def experiment_path(name_or_path: str | Path) -> Path:
     return path
 
 
-def read_experiment(path: Path, _chain: tuple[Path, ...] = ()) -> dict:
-    """The experiment file at ``path`` as a mapping, with the experiment it ``extends`` (if any) merged under it."""
+def read_experiment(path: Path, _chain: tuple[Path, ...] = ()) -> object:
+    """The experiment file at ``path`` as read (a mapping, unless the file is no experiment), with the experiment it
+    ``extends`` (if any) merged under it."""
     data = read_yaml(path)
     if not isinstance(data, dict) or "extends" not in data:
         return data

@@ -531,9 +531,10 @@ def fork(args: argparse.Namespace) -> None:
         if name not in BUILTINS:
             sys.exit(f"--add {name}: not a scripted player ({', '.join(BUILTINS)})")
         for role in BUILTINS[name].roles:
-            if any(entry.name == name for entry in pools[role].entries):
-                sys.exit(f"{source.name}: its {role} pool already holds {name}")
-            pools[role].add(name, name, generation=0)
+            try:
+                pools[role].add(name, name, generation=0)
+            except ValueError as error:  # it holds it already
+                sys.exit(f"{source.name}: {error}")
     args.to.mkdir(parents=True, exist_ok=True)
     partial = args.to / f".{source.name}.partial"
     shutil.rmtree(partial, ignore_errors=True)

@@ -158,17 +158,17 @@ def test_average_writes_the_mean_of_a_runs_checkpoints(zoo: Path, tmp_path: Path
     trained = zoo / "p" / "pursuer"
     rounds = tmp_path / "run" / "pursuer"  # two checkpoints of one learner, named like a self-play run's rounds
     rounds.mkdir(parents=True)
-    for name, source in (("round-001", sorted(trained.glob("ep*.zip"))[0].stem), ("round-002", "final")):
+    for name, source in (("round-999", sorted(trained.glob("ep*.zip"))[0].stem), ("round-1000", "final")):
         for suffix in (".zip", ".json"):
             shutil.copy(trained / f"{source}{suffix}", rounds / f"{name}{suffix}")
     result = invoke("zoo", "average", str(rounds), "--last", "2")
     assert result.exit_code == 0, result.output
-    out = rounds / "average-001-002.zip"
-    a, b, mean = (read_weights(path)[0]["policy"] for path in (rounds / "round-001.zip", rounds / "round-002.zip", out))
+    out = rounds / "average-999-1000.zip"  # rounds in their order, not the names' (round-1000 < round-999)
+    a, b, mean = (read_weights(path)[0]["policy"] for path in (rounds / "round-999.zip", rounds / "round-1000.zip", out))
     key = next(k for k in mean if k.startswith("actor.") and mean[k].is_floating_point())
     assert not a[key].equal(b[key]) and mean[key].allclose((a[key] + b[key]) / 2)
     meta = read_metadata(out)
-    assert meta.averaged == [str(rounds / "round-001.zip"), str(rounds / "round-002.zip")] and meta.role == "pursuer"
+    assert meta.averaged == [str(rounds / "round-999.zip"), str(rounds / "round-1000.zip")] and meta.role == "pursuer"
     policy = resolve_policy(str(out), "pursuer", quick, seed=0)  # it plays like any checkpoint
     assert policy.act(Game(quick, n=2, seed=0).reset()["pursuer"]).shape == (2, 2)
 

@@ -289,6 +289,12 @@ class SelfPlay(_Model):
         "whatever it won (AlphaStar's timeout), and starts afresh; 0: it joins only by winning exploiter_join",
     )
 
+    average_last: int = Field(
+        default=10, ge=0, le=100_000,
+        description="(ours) after every round each main learner's average.zip is the mean of the weights of its "
+        "last k rounds (fewer while the run is younger), the player a run hands over; 0: none",
+    )
+
     @model_validator(mode="after")
     def _league_alternates(self) -> SelfPlay:
         if self.opponents == "league" and self.schedule != "alternating":

@@ -186,6 +186,37 @@ def parameters(path: Path) -> th.Tensor:
     return th.cat([p.flatten() for p in TD3.load(path).policy.parameters()])
 
 
+def test_a_run_hands_over_the_mean_of_its_last_rounds(finished: tuple[Path, list[str]]) -> None:
+    run, _ = finished
+    for role in ("pursuer", "evader"):
+        rounds = [run / role / f"round-00{r}.zip" for r in (1, 2)]
+        meta = read_metadata(run / role / "average.zip")
+        assert meta.averaged == [str(path) for path in rounds]  # both rounds: the run is younger than average_last
+        assert (meta.role, meta.round) == (role, 2)
+        mean = (parameters(rounds[0]) + parameters(rounds[1])) / 2
+        assert th.allclose(parameters(run / role / "average.zip"), mean, atol=1e-6)
+        assert not th.allclose(mean, parameters(rounds[1]))  # the rounds differ: the mean is not the last one
+
+
+@pytest.mark.parametrize("last", [0, 1])
+def test_the_average_spans_average_last_rounds_and_catches_up_on_resume(quick: Scenario, tmp_path: Path,
+                                                                       last: int) -> None:
+    SelfPlay(job(quick, tmp_path, "sp", **{"selfplay.average_last": last})).run()
+    average = tmp_path / "sp" / "pursuer" / "average.zip"
+    if last == 0:
+        assert not average.exists()
+        return
+    assert read_metadata(average).averaged == [str(tmp_path / "sp" / "pursuer" / "round-002.zip")]
+    assert th.equal(parameters(average), parameters(tmp_path / "sp" / "pursuer" / "round-002.zip"))
+    average.unlink()  # as if stopped after round 2 was recorded, before its average was written
+    resumed = job(quick, tmp_path, "sp", **{"selfplay.average_last": last})
+    resumed.resume = True
+    loop = SelfPlay(resumed)
+    loop.run()  # nothing left to train: only the averages are written
+    assert loop.averages() == {role: tmp_path / "sp" / role / "average.zip" for role in ("pursuer", "evader")}
+    assert read_metadata(average).averaged == [str(tmp_path / "sp" / "pursuer" / "round-002.zip")]
+
+
 BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8, "belief_settings.buffer_size": 400,
          "belief_settings.warmup": 40, "belief_settings.batch_size": 16, "belief_settings.update_every": 2}
 
@@ -293,6 +324,7 @@ def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     result = invoke(*args)
     assert result.exit_code == 0, result.output
     assert "round 1/1" in result.output and (tmp_path / "cli" / "evader" / "round-001.zip").is_file()
+    assert f"to hand over: {tmp_path / 'cli' / 'pursuer' / 'average.zip'} (its last round)" in result.output.replace("\n", "")
     assert "already exists" in invoke(*args).output
     common = ["selfplay", "--zoo", str(tmp_path), "--resume", "-q"]
     result = invoke(*common, "--name", "cli", "--opponents", "pfsp")

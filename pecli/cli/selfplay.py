@@ -68,11 +68,13 @@ def selfplay(
     start with the paper's heuristic baselines. Simultaneous ([bold]--schedule simultaneous[/], the
     paper's MADDPG): both learners play each other in the same games and both learn every step.
     Both learners keep their networks and replay buffers from round to round. Checkpoints go to
-    [bold]zoo/<run>/<role>/round-NNN.zip[/] with their lineage; however the run stops,
+    [bold]zoo/<run>/<role>/round-NNN.zip[/] with their lineage, and [bold]<role>/average.zip[/], the mean of
+    the last rounds' weights (selfplay.average_last), is the player the run hands over; however the run stops,
     [bold]--resume[/] continues from its newest checkpoint. Settings: the config's
     [bold]training.selfplay[/] section.
     """
     from pecli.rl.algorithms import torch_device
+    from pecli.rl.averaging import averaged_from
     from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
@@ -129,8 +131,12 @@ def selfplay(
         err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
+    averages = loop.averages()
     for role, path in final.items():
-        err_console.print(f"[green]done[/]: {role} {path}", highlight=False)
+        rounds = len(averaged_from(averages[role]) or []) if role in averages else 0
+        what = "its last round" if rounds == 1 else f"the mean of its last {rounds} rounds"
+        average = f"; to hand over: {averages[role]} ({what})" if rounds else ""
+        err_console.print(f"[green]done[/]: {role} {path}{average}", highlight=False, soft_wrap=True)
 
 
 def _get(data: dict, dotted: str) -> object:

@@ -14,6 +14,8 @@ A run in the zoo::
         config.yaml, command.txt, versions.json, tb/     as for ``pecli train``
         selfplay.json                the state: pools and their records, finished turns, seeds
         pursuer/round-001.zip/.json  the pursuer after round 1, with its lineage in the metadata
+        pursuer/average.zip/.json    the mean of the pursuer's last ``average_last`` rounds' weights: what the run
+                                     hands over (rewritten after every round; pecli.rl.averaging)
         pursuer/resume/              the pursuer's durable state (pecli.rl.durable): model, optimisers, buffers
         evader/...
 
@@ -42,6 +44,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
+from pecli.rl.averaging import average_checkpoints, averaged_from
 from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
@@ -62,6 +65,7 @@ from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 from wrappers.simultaneous import SimultaneousGame
 
 STATE_FILE = "selfplay.json"
+AVERAGE_FILE = "average.zip"  # per main learner: the mean of its last rounds, what a run hands over
 
 
 class SelfPlayInterrupted(Exception):
@@ -315,10 +319,27 @@ class SelfPlay:
                 for kind, role in turns:  # the main agents first: the exploiters then train against the new ones
                     if not self.state.done(r, role, kind):
                         self._turn(r, role, kind)
+            self._write_averages()
             self.report(self._summary(r))
             if after_round is not None and not after_round(r):
                 break
+        self._write_averages()  # a run stopped between a round's record and its averages catches up here
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
+
+    def averages(self) -> dict[Role, Path]:
+        """Each main learner's ``average.zip`` (the mean of its last ``average_last`` rounds), where there is one."""
+        paths = {role: self.run_dir.path / role / AVERAGE_FILE for role in ROLES}
+        return {role: path for role, path in paths.items() if path.is_file()}
+
+    def _write_averages(self) -> None:
+        """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds, unless it holds them."""
+        last = self.settings.average_last
+        for role in ROLES if last else ():
+            turns = sorted((t for t in self.state.turns if t.role == role and t.learner == MAIN), key=lambda t: t.round)
+            paths = [self.run_dir.path / turn.checkpoint for turn in turns[-last:]]
+            out = self.run_dir.path / role / AVERAGE_FILE
+            if paths and averaged_from(out) != [str(path) for path in paths]:
+                average_checkpoints(paths, out)
 
     def _exploiters(self, r: int) -> list[Role]:
         """The sides whose league exploiter trains in round ``r``: ``league_exploiter_roles`` in every

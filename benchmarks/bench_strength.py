@@ -3,7 +3,7 @@
     python benchmarks/bench_strength.py train [--experiment strength|strength-small|schedules|FILE] \\
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
-    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N] [--average K]
+    python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N] [--average K [--average-evaders]]
     python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py compare --arms control=ZOO_A exploiters=ZOO_B [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
@@ -37,7 +37,8 @@ over the runs' own rates takes the training seed as the unit (wider spread, the 
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
 ``--average K`` plays each run's pursuer as the mean of its weights over the K rounds ending at the round read
-(``pecli zoo average``; the evaders stay the round's own).
+(``pecli zoo average``; the evaders stay the round's own, unless ``--average-evaders``: then both sides are
+what self-play hands over, its ``average.zip``).
 
 ``exploit`` measures how exploitable each run's final pursuer (``--role evader``: evader) is, which no target of
 the issue asks but cross-play hints at: a fresh ``none`` learner of the other side trains against it alone (TD3,
@@ -150,12 +151,13 @@ def train(args: argparse.Namespace) -> None:
 
 
 def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None,
-                  average: int = 1) -> dict[str, dict[str, Path]]:
+                  average: int = 1, averaged: tuple[str, ...] = ("pursuer",)) -> dict[str, dict[str, Path]]:
     """Each run's main checkpoint per role, ``{run: {role: path}}``: those of its newest round, of round
     ``at_round``, or with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where
-    a run of that budget would have stopped). A run not there yet is left out, and said so. With ``average``
-    k > 1 the pursuer is the mean of the main pursuer's weights over the k rounds ending there (written once to
-    ``<zoo>/report/average``)."""
+    a run of that budget would have stopped); ``"at"`` is that round's evader checkpoint (its round and CPU). A
+    run not there yet is left out, and said so. With ``average`` k > 1 the players of the roles ``averaged`` are
+    the means of the main learner's weights over the k rounds ending there (what self-play hands over: its
+    ``average.zip``; written once to ``<zoo>/report/average``)."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
         name = state.parent.name
@@ -177,19 +179,20 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
             print(f"{name}: left out, {where} so far", file=sys.stderr)
             continue
         runs[name] = {role: main[(chosen[0], role)] for role in ("pursuer", "evader")}
-        if average > 1:
-            rounds = [r for r in sorted(r for r, role in main if role == "pursuer") if r <= chosen[0]][-average:]
-            if len(rounds) < average:
-                print(f"{name}: left out, {len(rounds)} rounds to average, not {average}", file=sys.stderr)
-                del runs[name]
-                continue
-            out = zoo / "report" / "average" / f"{name}-pursuer-{rounds[0]:03d}-{rounds[-1]:03d}.zip"
+        runs[name]["at"] = main[(chosen[0], "evader")]
+        rounds = [r for r in done if r <= chosen[0]][-average:]
+        if average > 1 and len(rounds) < average:
+            print(f"{name}: left out, {len(rounds)} rounds to average, not {average}", file=sys.stderr)
+            del runs[name]
+            continue
+        for role in averaged if average > 1 else ():
+            out = zoo / "report" / "average" / f"{name}-{role}-{rounds[0]:03d}-{rounds[-1]:03d}.zip"
             if not out.is_file():
                 try:
-                    average_checkpoints([main[(r, "pursuer")] for r in rounds], out)
+                    average_checkpoints([main[(r, role)] for r in rounds], out)
                 except PecliError as error:  # checkpoints of another network (a run resumed with other settings)
-                    sys.exit(f"{name}: cannot average its pursuers: {error}")
-            runs[name]["pursuer"] = out
+                    sys.exit(f"{name}: cannot average its {role}s: {error}")
+            runs[name][role] = out
     if not runs:
         sys.exit(f"no self-play run under {zoo} has the rounds asked for: run `train` first, or ask for fewer")
     return runs
@@ -263,8 +266,10 @@ def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Pl
 
 
 def report(args: argparse.Namespace) -> None:
-    runs = final_players(args.zoo, args.cpu_hours, args.round, args.average)
-    scenario, of, found = checkpoint_players([p for latest in runs.values() for p in latest.values()], args.config)
+    runs = final_players(args.zoo, args.cpu_hours, args.round, args.average,
+                         ("pursuer", "evader") if args.average_evaders else ("pursuer",))
+    scenario, of, found = checkpoint_players([latest[role] for latest in runs.values() for role in ("pursuer", "evader")],
+                                             args.config)
     pursuers = {name: of[latest["pursuer"]] for name, latest in runs.items()}
     evaders = {name: of[latest["evader"]] for name, latest in runs.items()}
     scripted, pure, found = with_scripted(found)
@@ -295,10 +300,10 @@ def report(args: argparse.Namespace) -> None:
         cross = [faced[name][o] for o in others]
         held = rate(pure, evaders[name])
         cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
-        print(f"| {name} | {runs[name]['evader'].stem.split('-')[-1].lstrip('0')} | "
+        print(f"| {name} | {runs[name]['at'].stem.split('-')[-1].lstrip('0')} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
-              f"{cpu_hours_to(runs[name]['evader']):.2f} |")  # the round's (the pursuer may be an average)
+              f"{cpu_hours_to(runs[name]['at']):.2f} |")
         missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['heuristics']}" for e, (c, n) in zip(HEURISTIC_EVADERS, heuristic)
                    if c / n < TARGETS["heuristics"]]
         missed += [f"{name} vs {e}: {c / n:.3f} < {TARGETS['adversaries']}" for e, (c, n) in zip(ADVERSARIES, adversary)
@@ -330,7 +335,7 @@ def report(args: argparse.Namespace) -> None:
         (cb, nb), (cn, nn) = pool(faced, bimdn, common), pool(faced, none, common)
         p = two_proportion_z_test(cb, nb, cn, nn)
         better = cb / nb > cn / nn and p < 0.05
-        hours = {kind: sum(cpu_hours_to(runs[name]["evader"]) for name in names) / len(names)
+        hours = {kind: sum(cpu_hours_to(runs[name]["at"]) for name in names) / len(names)
                  for kind, names in (("bimdn", bimdn), ("none", none))}
         print(f"\n{schedule}: bimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} over the {len(common)} evaders every "
               f"one of them met ({', '.join(sorted(common))}) and every seed, at {hours['bimdn']:.2f} and "
@@ -599,6 +604,8 @@ def main() -> None:
     sub.choices["report"].add_argument("--average", type=int, default=1, metavar="K",
                                        help="each run's pursuer: the mean of its weights over the last K rounds "
                                        "(pecli zoo average) instead of the last round's")
+    sub.choices["report"].add_argument("--average-evaders", action="store_true",
+                                       help="with --average: the evaders too (both as self-play hands them over)")
     at = sub.choices["report"].add_mutually_exclusive_group()
     at.add_argument("--cpu-hours", type=float, default=None,
                     help="compare every run at this CPU budget (default: each run's newest round)")

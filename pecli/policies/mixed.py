@@ -7,12 +7,18 @@ is played by member ``assignment[i]`` for a whole episode, and a new member is d
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pecli.policies.base import Policy
 from pecli.roles import Role
+
+if TYPE_CHECKING:
+    from pecli.policies.stacked import StackedActors
+    from pecli.policies.windowed import Decision
 
 
 class MixedPolicy:
@@ -24,13 +30,16 @@ class MixedPolicy:
         names: one label per member, reported per game by :attr:`game_labels`.
         weights: draw probabilities (normalised here); default uniform. Can be changed while playing:
             new weights apply to the games that start afterwards.
+        stack: let learned members of one network shape decide together in one batched pass
+            (:mod:`pecli.policies.stacked`; the same actions up to float rounding, cheaper with many members).
 
     Each member keeps its own memory for all ``n`` games, but is only asked to act while it plays
     at least one game; a game handed to a member restarts that member's memory for it.
     """
 
     def __init__(
-        self, role: Role, members: Sequence[Policy], names: Sequence[str], weights: Sequence[float] | None = None
+        self, role: Role, members: Sequence[Policy], names: Sequence[str], weights: Sequence[float] | None = None,
+        stack: bool = True,
     ) -> None:
         if not members:
             raise ValueError("a mixed policy needs at least one member")
@@ -46,6 +55,12 @@ class MixedPolicy:
         self.n = 0
         self.assignment = np.zeros(0, dtype=np.int64)
         self._rng = np.random.default_rng()
+        self._stacked: dict[int, tuple[StackedActors, int]] = {}  # learned members of one shape decide together
+        learned = sys.modules.get("pecli.policies.learned")  # none is learned unless that module was loaded
+        if stack and learned is not None and sum(isinstance(m, learned.LearnedPolicy) for m in self.members) > 1:
+            from pecli.policies.stacked import StackedActors
+
+            self._stacked = StackedActors.of(self.members)
 
     @property
     def weights(self) -> np.ndarray:
@@ -89,9 +104,26 @@ class MixedPolicy:
         if obs.shape[0] != self.n:
             self.reset(obs.shape[0])
         actions = np.zeros((self.n, 2))
-        for k in np.unique(self.assignment):
-            rows = self.assignment == k
-            actions[rows] = np.asarray(self.members[k].act(obs))[rows]
+        present = np.unique(self.assignment).tolist()
+        waiting: dict[StackedActors, list[tuple[int, Decision]]] = {}
+        for k in present:
+            if k in self._stacked:  # its memory now; its decision below, with the others of its stack
+                decision = self.members[k].observe(obs)
+                if decision is not None:
+                    waiting.setdefault(self._stacked[k][0], []).append((k, decision))
+            else:
+                actions[self.assignment == k] = np.asarray(self.members[k].act(obs))[self.assignment == k]
+        for stack, decisions in waiting.items():
+            if len(decisions) >= stack.worth:
+                decided = stack.decide([self._stacked[k][1] for k, _ in decisions], [d.stack for _, d in decisions],
+                                       [d.history for _, d in decisions])
+            else:  # too few to gain from deciding together
+                decided = [self.members[k].decide(d) for k, d in decisions]
+            for (k, decision), chosen in zip(decisions, decided):
+                self.members[k].settle(decision.due, chosen)
+        for k in present:
+            if k in self._stacked:
+                actions[self.assignment == k] = self.members[k].held()[self.assignment == k]
         return actions
 
     def __repr__(self) -> str:

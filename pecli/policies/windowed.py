@@ -11,6 +11,7 @@ same numbers under the same seed.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,6 +20,15 @@ from pecli.roles import Role
 from pecli.scenario import Scenario
 
 Draws = tuple[np.ndarray, np.ndarray]  # uniform (n, samples) and normal (n, samples, 2), float32
+
+
+class Decision(NamedTuple):
+    """What a decision step hands to the network: the deciding games (``(n,)`` bool) and their inputs."""
+
+    due: np.ndarray
+    stack: np.ndarray  # (d, k * dim) frame stacks
+    history: np.ndarray | None  # (d, samples * dim) windows, or None without a belief
+    draws: Draws | None
 
 
 class WindowedPolicy(ABC):
@@ -79,6 +89,19 @@ class WindowedPolicy(ABC):
         self._ended |= np.asarray(mask, dtype=bool)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        decision = self.observe(obs)
+        if decision is not None:
+            self.settle(decision.due, self.decide(decision))
+        return self._action.copy()
+
+    def decide(self, decision: Decision) -> np.ndarray:
+        """The actions ``(d, 2)`` of the games of ``decision`` (from :meth:`observe`)."""
+        return self._decide(decision.stack, decision.history, decision.draws, decision.due)
+
+    def observe(self, obs: np.ndarray) -> Decision | None:
+        """The first half of :meth:`act`: update the memory with ``obs`` and, if any game decides now, return
+        what :meth:`_decide` takes for them; :meth:`settle` then takes their actions. (A caller that decides
+        for many players at once, :class:`~pecli.policies.mixed.MixedPolicy`, calls the two halves itself.)"""
         obs = np.asarray(obs, dtype=np.float32)
         if obs.shape[0] != self.n:
             self.reset(obs.shape[0])
@@ -98,11 +121,19 @@ class WindowedPolicy(ABC):
             self._fresh = np.zeros(self.n, dtype=bool)
         due = (self._clock % self.frame_skip == 0) & ~self._ended
         self._clock += 1
-        if due.any():
-            stack = self._stack.push(obs, mask=due)[due]
-            history = self._history.get()[due] if self._history is not None else None
-            self._action[due] = self._decide(stack, history, self._draw(int(due.sum())), due)
-        return self._action.copy()
+        if not due.any():
+            return None
+        stack = self._stack.push(obs, mask=due)[due]
+        history = self._history.get()[due] if self._history is not None else None
+        return Decision(due, stack, history, self._draw(int(due.sum())))
+
+    def settle(self, due: np.ndarray, actions: np.ndarray) -> None:
+        """The second half of :meth:`act`: the games ``due`` hold ``actions`` until they decide again."""
+        self._action[due] = actions
+
+    def held(self) -> np.ndarray:
+        """The action each game holds, ``(n, 2)``: what :meth:`act` returned last (not a copy)."""
+        return self._action
 
     def _draw(self, rows: int) -> Draws | None:
         """The random numbers of one decision for ``rows`` games, or ``None`` without a mixed belief."""

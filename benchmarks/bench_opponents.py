@@ -1,7 +1,7 @@
 """What a step of self-play's opponent pool costs: its learned members deciding one by one, or stacked.
 
     python benchmarks/bench_opponents.py [--config tuned] [--belief bimdn] [--set belief_settings.hidden=64] \\
-        [--role evader] [--members 1 2 4 8 16] [--steps 400] [--repeats 3]
+        [--role evader] [--members 1 2 4 8 16] [--games 16] [--steps 400] [--repeats 3]
     python benchmarks/bench_opponents.py --checkpoints 'runs/x/zoo/RUN/evader/round-*.zip' --role evader
 
 Self-play's opponent is a :class:`~pecli.policies.mixed.MixedPolicy` over the pool, each of the ``n_envs`` games
@@ -97,6 +97,7 @@ def main() -> None:
     parser.add_argument("--checkpoints", default=None, help="a glob of trained checkpoints instead of fresh members")
     parser.add_argument("--role", default="evader", choices=["pursuer", "evader"])
     parser.add_argument("--members", nargs="+", type=int, default=[1, 2, 4, 8, 16])
+    parser.add_argument("--games", type=int, default=None, help="games in the batch (default: the config's n_envs)")
     parser.add_argument("--steps", type=int, default=400, help="game steps per measurement")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
@@ -118,7 +119,7 @@ def main() -> None:
             what = f"fresh {args.role}s, " + ", ".join(f"{k}={v}" for k, v in settings.items())
     except PecliError as error:
         sys.exit(str(error))
-    games = scenario.training.n_envs
+    games = args.games or scenario.training.n_envs
     print(f"{scenario.name}: {what}; {games} games, {args.steps} game steps, median of {args.repeats}\n")
     print("| members | distinct in the first draw | one by one, ms per game step | stacked | ratio |")
     print("| ---: | ---: | ---: | ---: | ---: |")

@@ -266,6 +266,8 @@ def with_scripted(found: dict[str, list[Player]]) -> tuple[dict[str, Player], Pl
 
 
 def report(args: argparse.Namespace) -> None:
+    if args.average_evaders and args.average < 2:
+        sys.exit("--average-evaders averages the evaders over --average K rounds: give K of 2 or more")
     runs = final_players(args.zoo, args.cpu_hours, args.round, args.average,
                          ("pursuer", "evader") if args.average_evaders else ("pursuer",))
     scenario, of, found = checkpoint_players([latest[role] for latest in runs.values() for role in ("pursuer", "evader")],

@@ -292,7 +292,8 @@ class SelfPlay(_Model):
     average_last: int = Field(
         default=10, ge=0, le=100_000,
         description="(ours) after every round each main learner's average.zip is the mean of the weights of its "
-        "last k rounds (fewer while the run is younger), the player a run hands over; 0: none",
+        "last k rounds played after the curriculum (fewer while the run is younger; the newest round alone while "
+        "the curriculum runs), the player a run hands over; 0: none",
     )
 
     @model_validator(mode="after")

@@ -186,16 +186,25 @@ def parameters(path: Path) -> th.Tensor:
     return th.cat([p.flatten() for p in TD3.load(path).policy.parameters()])
 
 
-def test_a_run_hands_over_the_mean_of_its_last_rounds(finished: tuple[Path, list[str]]) -> None:
-    run, _ = finished
+def test_a_run_hands_over_the_mean_of_its_last_rounds(quick: Scenario, tmp_path: Path) -> None:
+    SelfPlay(job(quick, tmp_path, "sp", **{"curriculum.enabled": False, "selfplay.rounds": 3,
+                                           "selfplay.average_last": 2})).run()
+    run = tmp_path / "sp"
     for role in ("pursuer", "evader"):
-        rounds = [run / role / f"round-00{r}.zip" for r in (1, 2)]
+        rounds = [run / role / f"round-00{r}.zip" for r in (2, 3)]
         meta = read_metadata(run / role / "average.zip")
-        assert meta.averaged == [str(path) for path in rounds]  # both rounds: the run is younger than average_last
-        assert (meta.role, meta.round) == (role, 2)
+        assert meta.averaged == [str(path) for path in rounds]  # the last two
+        assert (meta.role, meta.round) == (role, 3)
         mean = (parameters(rounds[0]) + parameters(rounds[1])) / 2
         assert th.allclose(parameters(run / role / "average.zip"), mean, atol=1e-6)
         assert not th.allclose(mean, parameters(rounds[1]))  # the rounds differ: the mean is not the last one
+
+
+def test_rounds_played_in_the_curriculum_are_not_averaged(finished: tuple[Path, list[str]]) -> None:
+    run, _ = finished  # quick's curriculum spans 30 % of the run's transitions: all of round 1
+    for role in ("pursuer", "evader"):
+        assert read_metadata(run / role / "average.zip").averaged == [str(run / role / "round-002.zip")]
+        assert th.equal(parameters(run / role / "average.zip"), parameters(run / role / "round-002.zip"))
 
 
 @pytest.mark.parametrize("last", [0, 1])

@@ -32,11 +32,12 @@ def members(quick: Scenario, belief: str, count: int, role: str = "evader", **se
     return out
 
 
-def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 6) -> float:
+def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 16) -> float:
     """The largest difference between the actions of a stacked pool of ``players`` and of the same pool one by
     one, on the same observations (the one-by-one pool's actions are played; games restart as they end)."""
+    role = players[0].role
     names = [f"m{i}" for i in range(len(players))]
-    pools = [MixedPolicy("evader", copy.deepcopy(players), names, stack=stack)  # each its own copies: they keep memories
+    pools = [MixedPolicy(role, copy.deepcopy(players), names, stack=stack)  # each its own copies: they keep memories
              for stack in (True, False)]
     game = Game(quick, n=games, seed=3, auto_reset=True)
     obs = game.reset(seed=3)
@@ -45,9 +46,10 @@ def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 6) 
     rng = np.random.default_rng(0)
     worst = 0.0
     for _ in range(steps):
-        stacked, alone = (pool.act(obs["evader"]) for pool in pools)
+        stacked, alone = (pool.act(obs[role]) for pool in pools)
         worst = max(worst, float(np.abs(stacked - alone).max()))
-        result = game.step(rng.uniform(-1, 1, (games, 2)), alone)
+        other = rng.uniform(-1, 1, (games, 2))
+        result = game.step(*((alone, other) if role == "pursuer" else (other, alone)))
         obs = result.obs
         if result.done.any():
             for pool in pools:
@@ -55,27 +57,44 @@ def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 6) 
     return worst
 
 
-@pytest.mark.parametrize("belief", ["none", "bimdn"])
-def test_a_stacked_pool_plays_as_its_members_one_by_one(quick: Scenario, belief: str, monkeypatch) -> None:
-    count = 3 * WORTH_STACKING[belief]  # with 16 games, enough of them decide together in most steps
-    players = members(quick, belief, count)
-    pool = MixedPolicy("evader", players, [str(i) for i in range(count)])
-    assert len(pool._stacked) == count and len({id(stack) for stack, _ in pool._stacked.values()}) == 1
-    together: list[int] = []
+def counting(monkeypatch) -> list[int]:
+    """The ids of the stacks each stacked decision used, from now on."""
+    used: list[int] = []
     decide = StackedActors.decide
-    monkeypatch.setattr(StackedActors, "decide", lambda self, rows, *a: together.append(len(rows)) or decide(self, rows, *a))
-    assert play_both(quick, players, games=16) < 1e-5
-    assert len(together) > 20 and min(together) >= WORTH_STACKING[belief]  # most decisions were taken together
+    monkeypatch.setattr(StackedActors, "decide", lambda self, *a: used.append(id(self)) or decide(self, *a))
+    return used
 
 
-def test_only_members_of_one_shape_stack_and_the_others_decide_alone(quick: Scenario) -> None:
-    players = [*members(quick, "none", 3), *members(quick, "bimdn", 2), resolve_policy("greedy", "evader", quick),
-               *members(quick, "bimdn-mixed", 2), *members(quick, "none", 2, net_arch=[16, 16])]
-    pool = MixedPolicy("evader", players, [str(i) for i in range(10)])
+@pytest.mark.parametrize(("belief", "role"), [("none", "evader"), ("bimdn", "evader"), ("bimdn", "pursuer")])
+def test_a_stacked_pool_plays_as_its_members_one_by_one(quick: Scenario, belief: str, role: str, monkeypatch) -> None:
+    """The evader sees in the world frame; the car pursuer's belief points turn into its heading."""
+    count = 3 * WORTH_STACKING[belief]  # with 16 games, enough of them decide together in most steps
+    players = members(quick, belief, count, role)
+    pool = MixedPolicy(role, players, [str(i) for i in range(count)])
+    assert len(pool._stacked) == count and len({id(stack) for stack, _ in pool._stacked.values()}) == 1
+    used = counting(monkeypatch)
+    assert play_both(quick, players) < 1e-5
+    assert len(used) > 20  # most decisions were taken together
+
+
+def test_only_members_of_one_shape_stack_and_the_others_decide_alone(quick: Scenario, monkeypatch) -> None:
+    players = [*members(quick, "none", 6), *members(quick, "bimdn", 6), resolve_policy("greedy", "evader", quick),
+               *members(quick, "bimdn-mixed", 2), *members(quick, "none", 6, net_arch=[16, 16])]
+    pool = MixedPolicy("evader", players, [str(i) for i in range(len(players))])
     stacks = {index: id(stack) for index, (stack, _) in pool._stacked.items()}
-    assert sorted(stacks) == [0, 1, 2, 3, 4, 8, 9]  # not the scripted one, nor the mixed belief's sampling actors
-    assert len({stacks[i] for i in (0, 1, 2)}) == 1 and stacks[3] == stacks[4] and stacks[8] == stacks[9]
+    assert sorted(stacks) == [*range(12), *range(15, 21)]  # not the scripted one, nor the mixed belief's sampling actors
+    assert [len({stacks[i] for i in group}) for group in (range(6), range(6, 12), range(15, 21))] == [1, 1, 1]
     assert len(set(stacks.values())) == 3  # none 32-wide, bimdn, none 16-wide
-    assert StackedActors.key(players[5]) is None and StackedActors.key(players[6]) is None
-    assert play_both(quick, players, steps=60) < 1e-5
-    assert MixedPolicy("evader", players, [str(i) for i in range(10)], stack=False)._stacked == {}
+    assert StackedActors.key(players[12]) is None and StackedActors.key(players[13]) is None
+    used = counting(monkeypatch)
+    assert play_both(quick, players, steps=80, games=24) < 1e-5
+    assert len(set(used)) >= 2  # stacks of two shapes decided together at times
+    assert MixedPolicy("evader", players, [str(i) for i in range(len(players))], stack=False)._stacked == {}
+
+
+def test_many_games_per_member_decide_on_their_own() -> None:
+    from pecli.policies.stacked import MAX_GAMES_PER_MEMBER
+
+    stack = StackedActors.__new__(StackedActors)
+    stack.worth = 4
+    assert stack.worth_it(4, 8) and not stack.worth_it(3, 3) and not stack.worth_it(4, int(4 * MAX_GAMES_PER_MEMBER) + 1)

@@ -114,7 +114,7 @@ class MixedPolicy:
             else:
                 actions[self.assignment == k] = np.asarray(self.members[k].act(obs))[self.assignment == k]
         for stack, decisions in waiting.items():
-            if len(decisions) >= stack.worth:
+            if stack.worth_it(len(decisions), sum(len(d.stack) for _, d in decisions)):
                 decided = stack.decide([self._stacked[k][1] for k, _ in decisions], [d.stack for _, d in decisions],
                                        [d.history for _, d in decisions])
             else:  # too few to gain from deciding together

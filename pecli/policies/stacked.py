@@ -7,7 +7,8 @@ window for each member, about a millisecond however few rows it has. :class:`Sta
 members' parameters (``(members, ...)``, a copy taken when the stack is built: pool members are frozen) and runs
 every game deciding in a step at once, each with its member's weights: one batched matrix product per layer and
 per LSTM time step, whatever the number of members. With few members deciding, their own calls are cheaper
-(``WORTH_STACKING``); :class:`~pecli.policies.mixed.MixedPolicy` then lets them decide alone.
+(``WORTH_STACKING``), and so is a member's own call with many games (each game's row gathers its member's
+weights: ``MAX_GAMES_PER_MEMBER``); :class:`~pecli.policies.mixed.MixedPolicy` then lets them decide alone.
 
 It covers the deterministic actors of off-policy checkpoints built of ``Linear``, ``ReLU`` and ``Tanh`` layers
 (TD3 and DDPG; SAC's and TQC's squashed mean), without a belief or with a ``bimdn`` one; players of other kinds
@@ -31,6 +32,9 @@ from pecli.rl.extractors import BeliefExtractor, KeysExtractor
 # how many members must decide in one step for deciding together to be cheaper than one by one (one CPU core,
 # benchmarks/bench_opponents.py): below it, they decide on their own
 WORTH_STACKING = {"none": 4, "bimdn": 4}
+# and at most this many games per member on average: each game's row gathers its member's weights, so with many
+# games per member their own batched calls are cheaper (self-play's 16 games among ten members: 1.6)
+MAX_GAMES_PER_MEMBER = 2.0
 Stack = list[tuple[str, th.Tensor | None, th.Tensor | None]]  # ("linear", W (M, out, in), b (M, out)) or an activation
 ACTIVATIONS = {nn.ReLU: "relu", nn.Tanh: "tanh"}
 
@@ -130,6 +134,10 @@ class StackedActors:
         self.frame = beliefs[0].frame if beliefs[0] is not None else None
         self.window = beliefs[0].window if beliefs[0] is not None else None
         self.worth = WORTH_STACKING["bimdn" if self.belief is not None else "none"]
+
+    def worth_it(self, members: int, games: int) -> bool:
+        """Whether ``members`` deciding for ``games`` games in all decide faster together than one by one."""
+        return members >= self.worth and games <= MAX_GAMES_PER_MEMBER * members
 
     @staticmethod
     def key(member: object) -> tuple | None:

@@ -332,11 +332,16 @@ class SelfPlay:
         return {role: path for role, path in paths.items() if path.is_file()}
 
     def _write_averages(self) -> None:
-        """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds, unless it holds them."""
+        """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds played wholly on the
+        real game (after the curriculum; the newest round alone while it runs), unless it holds them."""
         last = self.settings.average_last
+        curriculum = self.scenario.training.curriculum
+        eased = curriculum.span(self.state.curriculum_steps) if curriculum.enabled else 0  # transitions per learner
         for role in ROLES if last else ():
             turns = sorted((t for t in self.state.turns if t.role == role and t.learner == MAIN), key=lambda t: t.round)
-            paths = [self.run_dir.path / turn.checkpoint for turn in turns[-last:]]
+            started = [0, *(turn.steps for turn in turns)]  # the learner's transitions when each turn began
+            real = [turn for turn, steps in zip(turns, started) if steps >= eased] or turns[-1:]
+            paths = [self.run_dir.path / turn.checkpoint for turn in real[-last:]]
             out = self.run_dir.path / role / AVERAGE_FILE
             if paths and averaged_from(out) != [str(path) for path in paths]:
                 average_checkpoints(paths, out)

@@ -94,10 +94,6 @@ class WindowedPolicy(ABC):
             self.settle(decision.due, self.decide(decision))
         return self._action.copy()
 
-    def decide(self, decision: Decision) -> np.ndarray:
-        """The actions ``(d, 2)`` of the games of ``decision`` (from :meth:`observe`)."""
-        return self._decide(decision.stack, decision.history, decision.draws, decision.due)
-
     def observe(self, obs: np.ndarray) -> Decision | None:
         """The first half of :meth:`act`: update the memory with ``obs`` and, if any game decides now, return
         what :meth:`_decide` takes for them; :meth:`settle` then takes their actions. (A caller that decides
@@ -126,6 +122,10 @@ class WindowedPolicy(ABC):
         stack = self._stack.push(obs, mask=due)[due]
         history = self._history.get()[due] if self._history is not None else None
         return Decision(due, stack, history, self._draw(int(due.sum())))
+
+    def decide(self, decision: Decision) -> np.ndarray:
+        """The actions ``(d, 2)`` of the games of ``decision`` (from :meth:`observe`)."""
+        return self._decide(decision.stack, decision.history, decision.draws, decision.due)
 
     def settle(self, due: np.ndarray, actions: np.ndarray) -> None:
         """The second half of :meth:`act`: the games ``due`` hold ``actions`` until they decide again."""

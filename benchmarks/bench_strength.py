@@ -38,7 +38,7 @@ stopped (``--round N``: of round N, equal transitions per main learner instead o
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
 ``--average K`` plays each run's pursuer as the mean of its weights over the K rounds ending at the round read
 (``pecli zoo average``; the evaders stay the round's own, unless ``--average-evaders``: then both sides are
-what self-play hands over, its ``average.zip``).
+averaged, as self-play's ``average.zip`` once those rounds are all after the curriculum).
 
 ``exploit`` measures how exploitable each run's final pursuer (``--role evader``: evader) is, which no target of
 the issue asks but cross-play hints at: a fresh ``none`` learner of the other side trains against it alone (TD3,
@@ -156,8 +156,9 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
     ``at_round``, or with ``cpu_hours`` of the first round by whose end the run had spent that much CPU (where
     a run of that budget would have stopped); ``"at"`` is that round's evader checkpoint (its round and CPU). A
     run not there yet is left out, and said so. With ``average`` k > 1 the players of the roles ``averaged`` are
-    the means of the main learner's weights over the k rounds ending there (what self-play hands over: its
-    ``average.zip``; written once to ``<zoo>/report/average``)."""
+    the means of the main learner's weights over the k rounds ending there (written once to
+    ``<zoo>/report/average``; self-play's ``average.zip`` is the same once those rounds are all after the
+    curriculum)."""
     runs = {}
     for state in sorted(zoo.glob("*/selfplay.json")):
         name = state.parent.name
@@ -607,7 +608,8 @@ def main() -> None:
                                        help="each run's pursuer: the mean of its weights over the last K rounds "
                                        "(pecli zoo average) instead of the last round's")
     sub.choices["report"].add_argument("--average-evaders", action="store_true",
-                                       help="with --average: the evaders too (both as self-play hands them over)")
+                                       help="with --average: the evaders too (both sides averaged, as self-play "
+                                       "hands them over once the last K rounds are all after the curriculum)")
     at = sub.choices["report"].add_mutually_exclusive_group()
     at.add_argument("--cpu-hours", type=float, default=None,
                     help="compare every run at this CPU budget (default: each run's newest round)")

@@ -57,11 +57,18 @@ def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 16)
     return worst
 
 
-def counting(monkeypatch) -> list[int]:
-    """The ids of the stacks each stacked decision used, from now on."""
-    used: list[int] = []
+def counting(monkeypatch) -> list[tuple[int, int, int]]:
+    """Each stacked decision from now on: (its stack's id, members deciding, their games); each checked against
+    the stack's limits."""
+    used: list[tuple[int, int, int]] = []
     decide = StackedActors.decide
-    monkeypatch.setattr(StackedActors, "decide", lambda self, *a: used.append(id(self)) or decide(self, *a))
+
+    def counted(self: StackedActors, rows, stacks, histories):
+        used.append((id(self), len(rows), sum(len(stack) for stack in stacks)))
+        assert len(rows) >= self.worth and used[-1][2] <= self.games_per_member * len(rows)
+        return decide(self, rows, stacks, histories)
+
+    monkeypatch.setattr(StackedActors, "decide", counted)
     return used
 
 
@@ -88,13 +95,12 @@ def test_only_members_of_one_shape_stack_and_the_others_decide_alone(quick: Scen
     assert StackedActors.key(players[12]) is None and StackedActors.key(players[13]) is None
     used = counting(monkeypatch)
     assert play_both(quick, players, steps=80, games=24) < 1e-5
-    assert len(set(used)) >= 2  # stacks of two shapes decided together at times
+    assert len({stack for stack, _, _ in used}) >= 2  # stacks of two shapes decided together at times
     assert MixedPolicy("evader", players, [str(i) for i in range(len(players))], stack=False)._stacked == {}
 
 
-def test_many_games_per_member_decide_on_their_own() -> None:
-    from pecli.policies.stacked import MAX_GAMES_PER_MEMBER
-
-    stack = StackedActors.__new__(StackedActors)
-    stack.worth = 4
-    assert stack.worth_it(4, 8) and not stack.worth_it(3, 3) and not stack.worth_it(4, int(4 * MAX_GAMES_PER_MEMBER) + 1)
+def test_many_games_per_member_decide_on_their_own(quick: Scenario, monkeypatch) -> None:
+    players = members(quick, "none", 5)
+    used = counting(monkeypatch)
+    assert play_both(quick, players, steps=20, games=64) < 1e-5  # about 13 games each: one by one is cheaper
+    assert used == []

@@ -32,9 +32,10 @@ from pecli.rl.extractors import BeliefExtractor, KeysExtractor
 # how many members must decide in one step for deciding together to be cheaper than one by one (one CPU core,
 # benchmarks/bench_opponents.py): below it, they decide on their own
 WORTH_STACKING = {"none": 4, "bimdn": 4}
-# and at most this many games per member on average: each game's row gathers its member's weights, so with many
-# games per member their own batched calls are cheaper (self-play's 16 games among ten members: 1.6)
-MAX_GAMES_PER_MEMBER = 2.0
+# and at most this many deciding games per member on average: each game's row gathers its member's weights, so with
+# many games per member their own batched calls are cheaper, the sooner the larger the network (ten members, 32 games:
+# 0.67x without a belief, 0.79x with a 64-unit BiMDN, 1.4x with 128 units; self-play's 16 among ten: 1.6)
+MAX_GAMES_PER_MEMBER = {"none": 4.0, "bimdn": 2.0}
 Stack = list[tuple[str, th.Tensor | None, th.Tensor | None]]  # ("linear", W (M, out, in), b (M, out)) or an activation
 ACTIVATIONS = {nn.ReLU: "relu", nn.Tanh: "tanh"}
 
@@ -133,11 +134,12 @@ class StackedActors:
         self.belief = _StackedBiMDN([b.net for b in beliefs]) if beliefs[0] is not None else None  # type: ignore
         self.frame = beliefs[0].frame if beliefs[0] is not None else None
         self.window = beliefs[0].window if beliefs[0] is not None else None
-        self.worth = WORTH_STACKING["bimdn" if self.belief is not None else "none"]
+        kind = "bimdn" if self.belief is not None else "none"
+        self.worth, self.games_per_member = WORTH_STACKING[kind], MAX_GAMES_PER_MEMBER[kind]
 
     def worth_it(self, members: int, games: int) -> bool:
         """Whether ``members`` deciding for ``games`` games in all decide faster together than one by one."""
-        return members >= self.worth and games <= MAX_GAMES_PER_MEMBER * members
+        return members >= self.worth and games <= self.games_per_member * members
 
     @staticmethod
     def key(member: object) -> tuple | None:

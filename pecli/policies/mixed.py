@@ -104,15 +104,15 @@ class MixedPolicy:
         if obs.shape[0] != self.n:
             self.reset(obs.shape[0])
         actions = np.zeros((self.n, 2))
-        present = np.unique(self.assignment).tolist()
+        present = {k: self.assignment == k for k in np.unique(self.assignment).tolist()}  # member -> its games
         waiting: dict[StackedActors, list[tuple[int, Decision]]] = {}
-        for k in present:
+        for k, rows in present.items():
             if k in self._stacked:  # its memory now; its decision below, with the others of its stack
                 decision = self.members[k].observe(obs)
                 if decision is not None:
                     waiting.setdefault(self._stacked[k][0], []).append((k, decision))
             else:
-                actions[self.assignment == k] = np.asarray(self.members[k].act(obs))[self.assignment == k]
+                actions[rows] = np.asarray(self.members[k].act(obs))[rows]
         for stack, decisions in waiting.items():
             if stack.worth_it(len(decisions), sum(len(d.stack) for _, d in decisions)):
                 decided = stack.decide([self._stacked[k][1] for k, _ in decisions], [d.stack for _, d in decisions],
@@ -121,9 +121,9 @@ class MixedPolicy:
                 decided = [self.members[k].decide(d) for k, d in decisions]
             for (k, decision), chosen in zip(decisions, decided):
                 self.members[k].settle(decision.due, chosen)
-        for k in present:
+        for k, rows in present.items():
             if k in self._stacked:
-                actions[self.assignment == k] = self.members[k].held()[self.assignment == k]
+                actions[rows] = self.members[k].held()[rows]
         return actions
 
     def __repr__(self) -> str:

@@ -182,7 +182,8 @@ def average(
 
     if len(checkpoints) == 1 and checkpoints[0].is_dir():
         folder = checkpoints[0]
-        rounds = sorted(folder.glob("round-*.zip"), key=lambda path: int(path.stem.removeprefix("round-")))
+        rounds = sorted((path for path in folder.glob("round-*.zip") if path.stem.removeprefix("round-").isdigit()),
+                        key=lambda path: int(path.stem.removeprefix("round-")))  # the rounds self-play writes
         if len(rounds) < last:
             raise PecliError(f"{folder}: {len(rounds)} round checkpoints, fewer than --last {last}")
         checkpoints = rounds[-last:]

@@ -180,6 +180,8 @@ def test_average_refuses_checkpoints_of_different_networks(zoo: Path, tmp_path: 
     assert result.exit_code == 1 and "its role differs" in result.output and result.output.strip().count("\n") == 0
     result = invoke("zoo", "average", str(p), str(p))
     assert result.exit_code == 1 and "give --out" in result.output
+    result = invoke("zoo", "average", str(tmp_path / "nowhere.zip"))  # a typo is named before --out is asked for
+    assert result.exit_code == 1 and "no checkpoint at" in result.output and "nowhere.zip" in result.output
     result = invoke("zoo", "average", str(zoo / "p" / "pursuer"), "--last", "50")
     assert result.exit_code == 1 and "fewer than --last 50" in result.output
     assert not (tmp_path / "mix.zip").exists()

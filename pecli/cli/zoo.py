@@ -189,15 +189,15 @@ def average(
         checkpoints = rounds[-last:]
         first, newest = (path.stem.removeprefix("round-") for path in (checkpoints[0], checkpoints[-1]))
         out = out or folder / f"average-{first}-{newest}.zip"
+    for path in checkpoints:
+        if not path.is_file():
+            raise PecliError(f"no checkpoint at {path}")
     if out is None:
         raise PecliError("give --out: the checkpoint to write")
     if out.suffix != ".zip":
         raise PecliError(f"--out {out}: a checkpoint is a .zip file")
     if any(out.resolve() == path.resolve() for path in checkpoints):
         raise PecliError(f"--out {out} is one of the checkpoints averaged")
-    for path in checkpoints:
-        if not path.is_file():
-            raise PecliError(f"no checkpoint at {path}")
     meta = average_checkpoints(checkpoints, out)
     err_console.print(f"wrote {out}: the mean of {len(checkpoints)} {meta.role} checkpoints "
                       f"({checkpoints[0].name} .. {checkpoints[-1].name})", highlight=False)

@@ -92,7 +92,7 @@ from pecli.policies.registry import BUILTINS  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.rl.averaging import average_checkpoints  # noqa: E402
 from pecli.rl.pool import OpponentPool  # noqa: E402
-from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted  # noqa: E402
+from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted, round_of  # noqa: E402
 from pecli.roles import opponent_of  # noqa: E402
 from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
@@ -202,7 +202,7 @@ def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | Non
 def cpu_hours_to(checkpoint: Path) -> float:
     """CPU hours its run had spent by the end of the round that wrote ``checkpoint`` (``<run>/<role>/round-N.zip``)."""
     turns = json.loads((checkpoint.parent.parent / "selfplay.json").read_text())["turns"]
-    return cpu_through(turns, int(checkpoint.stem.split("-")[-1])) / 3600
+    return cpu_through(turns, round_of(checkpoint)) / 3600
 
 
 Faced = dict[str, dict[str, tuple[int, int]]]  # run -> each evader its pursuer met -> (captures, episodes)
@@ -303,7 +303,7 @@ def report(args: argparse.Namespace) -> None:
         cross = [faced[name][o] for o in others]
         held = rate(pure, evaders[name])
         cross_rate = sum(c for c, _ in cross) / max(sum(n for _, n in cross), 1)
-        print(f"| {name} | {runs[name]['at'].stem.split('-')[-1].lstrip('0')} | "
+        print(f"| {name} | {round_of(runs[name]['at'])} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in heuristic)} | "
               f"{' / '.join(f'{c / n:.2f}' for c, n in adversary)} | {cross_rate:.2f} | {held[0] / held[1]:.2f} | "
               f"{cpu_hours_to(runs[name]['at']):.2f} |")

@@ -179,16 +179,15 @@ def average(
     robustly than any one of them, at no training cost (docs/benchmarks.md). The result plays like any checkpoint.
     """
     from pecli.rl.averaging import average_checkpoints
+    from pecli.rl.selfplay import round_of
 
     if len(checkpoints) == 1 and checkpoints[0].is_dir():
         folder = checkpoints[0]
-        rounds = sorted((path for path in folder.glob("round-*.zip") if path.stem.removeprefix("round-").isdigit()),
-                        key=lambda path: int(path.stem.removeprefix("round-")))  # the rounds self-play writes
+        rounds = sorted((path for path in folder.glob("*.zip") if round_of(path) is not None), key=round_of)
         if len(rounds) < last:
             raise PecliError(f"{folder}: {len(rounds)} round checkpoints, fewer than --last {last}")
         checkpoints = rounds[-last:]
-        first, newest = (path.stem.removeprefix("round-") for path in (checkpoints[0], checkpoints[-1]))
-        out = out or folder / f"average-{first}-{newest}.zip"
+        out = out or folder / f"average-{round_of(checkpoints[0]):03d}-{round_of(checkpoints[-1]):03d}.zip"
     for path in checkpoints:
         if not path.is_file():
             raise PecliError(f"no checkpoint at {path}")

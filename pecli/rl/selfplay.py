@@ -180,6 +180,12 @@ def checkpoint_name(round: int) -> str:
     return f"round-{round:03d}"
 
 
+def round_of(checkpoint: Path) -> int | None:
+    """The round whose checkpoint ``checkpoint`` is (``round-003.zip`` → 3); ``None`` for any other name."""
+    number = checkpoint.stem.removeprefix("round-")
+    return int(number) if checkpoint.stem != number and number.isdigit() else None
+
+
 def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
     """Pools holding the baselines of each role: generation 0."""
     sp = scenario.training.selfplay

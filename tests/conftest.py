@@ -11,7 +11,7 @@ import torch as th
 
 from pecli.scenario import Scenario, builtin_names, load_scenario
 
-BUILTINS = ["paper", "car_vs_car", "point_mass", "robots", "quick", "tuned"]
+BUILTINS = ["paper", "car_vs_car", "point_mass", "robots", "quick", "tuned", "league"]
 
 
 @pytest.fixture(scope="session")

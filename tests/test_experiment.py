@@ -20,6 +20,8 @@ from pecli.errors import ConfigError, PecliError
 from pecli.experiment import ExperimentRunner, builtin_experiments, load_experiment
 from pecli.experiment.runs import SELFPLAY_STATE, run_progress
 from pecli.experiment.spec import RunSpec, experiment_from_dict
+from pecli.rl.train import with_overrides
+from pecli.scenario import load_scenario
 
 from conftest import hold
 
@@ -73,6 +75,10 @@ def test_builtin_experiments() -> None:
         training = theirs.scenario.training
         assert mine.name == theirs.name and mine.scenario.fingerprint() == theirs.scenario.fingerprint()
         assert mine.scenario.training.model_copy(update={"belief_settings": training.belief_settings}) == training
+    preset = load_scenario("league")  # `pecli selfplay -c league` trains strength-small's runs, one at a time
+    for run in small.runs():
+        assert with_overrides(preset, {"belief": run.kind}).training == run.scenario.training
+        assert preset.fingerprint() == run.scenario.fingerprint()
 
 
 @pytest.mark.parametrize(("change", "message"), [

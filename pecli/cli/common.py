@@ -46,7 +46,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 DEBUG_VARIABLE = "PECLI_DEBUG"
 
-BUILTIN_CONFIGS = "paper, tuned, quick, car_vs_car, point_mass, robots"
+BUILTIN_CONFIGS = "paper, tuned, league, quick, car_vs_car, point_mass, robots"
 PlayersConfigOption = Annotated[
     str | None,
     typer.Option(

@@ -128,6 +128,10 @@ class SelfPlayState:
         mine = [t for t in self.turns if t.role == role and t.learner == learner]
         return mine[-1] if mine else None
 
+    def cpu_seconds(self, through: int | None = None) -> float:
+        """CPU seconds of the finished turns (exploiters' included), of rounds 1 to ``through`` if given."""
+        return sum(t.cpu_seconds for t in self.turns if through is None or t.round <= through)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "seed": self.seed,
@@ -360,7 +364,7 @@ class SelfPlay:
         every = sp.league_exploiter_every if sp.opponents == "league" else 0
         if not every or r % every:
             return []
-        spent = sum(turn.cpu_seconds for turn in self.state.turns if turn.round < r)
+        spent = self.state.cpu_seconds(through=r - 1)
         return list(sp.league_exploiter_roles) if spent >= 3600.0 * sp.league_exploiter_after else []
 
     def _joint_round(self, r: int, games: SimultaneousGame) -> None:
@@ -400,7 +404,7 @@ class SelfPlay:
                 progress[role].update(cpu_seconds=progress[role]["cpu_seconds"] + share,
                                       episodes=stats[role].episodes, captures=stats[role].captures)
                 episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role) + stats[role].episodes
-                run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + sum(p["cpu_seconds"] for p in progress.values())
+                run_cpu = self.state.cpu_seconds() + sum(p["cpu_seconds"] for p in progress.values())
                 learner = learners[role]
                 sources[role] = learner.durable.save(learner.model, learner.fit, episodes, run_cpu, extra=dict(progress[role]))
             return sources
@@ -486,7 +490,7 @@ class SelfPlay:
             cpu = now
             episodes = sum(turn.episodes for turn in self.state.turns if turn.role == role and turn.learner == kind) \
                 + tracker.episodes
-            run_cpu = sum(turn.cpu_seconds for turn in self.state.turns) + progress["cpu_seconds"]
+            run_cpu = self.state.cpu_seconds() + progress["cpu_seconds"]
             return learner.durable.save(model, learner.fit, episodes, run_cpu, extra=dict(progress))
 
         tracker.listeners.append(every_episodes(t.checkpoint_every, tracker.episodes, lambda _: commit()))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import math
+import re
 import sys
 from pathlib import Path
 from unittest import mock
@@ -356,8 +357,9 @@ def test_a_cpu_budget_stops_the_run_after_the_round_that_reaches_it(tmp_path: Pa
             *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")]]
     result = invoke(*args, "--cpu-hours", "1e-9")  # any round reaches it
     assert result.exit_code == 0, result.output
-    assert "or 1e-09 CPU-hours, whichever comes first" in result.output and "budget reached" in result.output
+    assert "or 1e-09 CPU-hours, whichever comes first, on quick" in result.output and "budget reached" in result.output
     assert "after round 1" in result.output and "round 2/3" not in result.output
+    assert re.search(r"CPU-s\), [\d.e-]+ of 1e-09 CPU-hours", result.output)  # each round's line: how much is used
     assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
     assert "to hand over" in result.output
     resume = ["selfplay", "--zoo", str(tmp_path), "--name", "cpu", "--resume", "-q"]

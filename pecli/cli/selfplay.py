@@ -115,7 +115,7 @@ def selfplay(
             raise PecliError(f"run '{name}' has played {played} rounds already: --rounds must be at least that")
         seed = state.seed
         if cpu_hours is not None and (spent := _spent_by_last_round(state)) >= cpu_hours * 3600:
-            err_console.print(f"run '{name}' has used {spent / 3600:.2f} CPU-hours already, --cpu-hours "
+            err_console.print(f"run '{name}' has used {spent / 3600:.3g} CPU-hours already, --cpu-hours "
                               f"{cpu_hours:g}: nothing to train (a larger --cpu-hours continues it)", highlight=False)
             _hand_over(run.path, state)
             return
@@ -135,10 +135,13 @@ def selfplay(
         device=device,
     )
 
+    def spent() -> str:  # how much of the budget the run has used, after each round's line
+        return "" if cpu_hours is None else f", {loop.state.cpu_seconds() / 3600:.3g} of {cpu_hours:g} CPU-hours"
+
     try:
         with sigterm_stops():
-            loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
-            budget = "" if cpu_hours is None else f" or {cpu_hours:g} CPU-hours, whichever comes first"
+            loop = SelfPlay(job, report=lambda line: err_console.print(line + spent(), highlight=False))
+            budget = "" if cpu_hours is None else f" or {cpu_hours:g} CPU-hours, whichever comes first,"
             err_console.print(
                 f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side"
                 f"{budget} on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
@@ -163,7 +166,7 @@ def _within(loop: SelfPlay, r: int, cpu_hours: float) -> bool:
     spent = loop.state.cpu_seconds(through=r)
     if spent < cpu_hours * 3600:
         return True
-    err_console.print(f"budget reached: {spent / 3600:.2f} of --cpu-hours {cpu_hours:g} after round {r}", highlight=False)
+    err_console.print(f"budget reached: {spent / 3600:.3g} CPU-hours (--cpu-hours {cpu_hours:g}) after round {r}", highlight=False)
     return False
 
 

@@ -82,7 +82,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.cli.common import one_torch_thread, sigterm_stops  # noqa: E402
 from pecli.experiment.pipeline import changes  # noqa: E402
-from pecli.experiment.runs import cpu_through  # noqa: E402
+from pecli.rl.budget import cpu_through  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
 from pecli.io import atomic_write_json, file_digest  # noqa: E402

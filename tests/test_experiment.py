@@ -79,6 +79,9 @@ def test_builtin_experiments() -> None:
     for run in small.runs():
         assert with_overrides(preset, {"belief": run.kind}).training == run.scenario.training
         assert preset.fingerprint() == run.scenario.fingerprint()
+    for run in lite:  # and with `--belief bimdn --set belief_settings.hidden=64` strength-lite's
+        settings = {"belief": run.kind, "belief_settings.hidden": 64}
+        assert with_overrides(preset, settings).training == run.scenario.training
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -351,28 +351,32 @@ def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     assert result.exit_code == 1 and "not a self-play run" in result.output
 
 
-def test_a_cpu_budget_stops_the_run_after_the_round_that_reaches_it(tmp_path: Path) -> None:
+def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None:
     args = ["selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "cpu", "--rounds", "3",
             "--steps-per-round", "120", "-q",
             *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")]]
+    state_file = tmp_path / "cpu" / "selfplay.json"
     result = invoke(*args, "--cpu-hours", "1e-9")  # any round reaches it
     assert result.exit_code == 0, result.output
-    assert "or 1e-09 CPU-hours, whichever comes first, on quick" in result.output and "budget reached" in result.output
-    assert "after round 1" in result.output and "round 2/3" not in result.output
-    assert re.search(r"CPU-s\), [\d.e-]+ of 1e-09 CPU-hours", result.output)  # each round's line: how much is used
-    assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
-    assert "to hand over" in result.output
+    assert "or 1e-09 CPU-h, whichever comes first, on quick" in result.output
+    assert re.search(r"round 1/3: .* CPU-s; 0\.00 of 1e-09 CPU-h\)", result.output)  # each round says what is used
+    assert "budget reached: 0.00 of 1e-09 CPU-h after round 1" in result.output and "round 2/3" not in result.output
+    assert "to hand over" in result.output and json.loads(state_file.read_text())["cpu_hours"] == 1e-9
     resume = ["selfplay", "--zoo", str(tmp_path), "--name", "cpu", "--resume", "-q"]
-    result = invoke(*resume, "--cpu-hours", "1e-9")
-    assert result.exit_code == 0 and "nothing to train (a larger --cpu-hours continues it)" in result.output, result.output
+    result = invoke(*resume)  # the run keeps its budget
+    assert result.exit_code == 0, result.output
+    assert "nothing to train: a larger --cpu-hours continues the run" in result.output and "to hand over" in result.output
     assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
-    result = invoke(*resume, "--cpu-hours", "1000")  # a larger budget continues it, to the ceiling of rounds
+    result = invoke(*resume, "--cpu-hours", "1000")  # a new budget replaces it: on to the ceiling of rounds
     assert result.exit_code == 0 and "round 3/3" in result.output and "budget reached" not in result.output
-    state = json.loads((tmp_path / "cpu" / "selfplay.json").read_text())
-    assert max(t["round"] for t in state["turns"]) == 3
-    for bad in ("0", "-1", "nan", "inf"):
+    assert re.search(r"or 1000 CPU-h \(0\.\d\d used\)", result.output)
+    assert json.loads(state_file.read_text())["cpu_hours"] == 1000
+    result = invoke(*resume)
+    assert "nothing to train: a larger --rounds continues the run" in result.output
+    assert max(t["round"] for t in json.loads(state_file.read_text())["turns"]) == 3
+    for bad in ("0", "-1", "nan", "inf", "20000"):
         result = invoke(*resume, "--cpu-hours", bad)
-        assert result.exit_code == 1 and "--cpu-hours must be a positive number of hours" in result.output
+        assert result.exit_code == 1 and "--cpu-hours must be a number of hours above 0 and at most 10,000" in result.output
 
 
 def test_a_diverging_self_play_stops_without_writing_its_round(tmp_path: Path) -> None:

@@ -5,17 +5,15 @@ from __future__ import annotations
 import enum
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
 from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
 from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
 from pecli.errors import PecliError
+from pecli.rl.budget import MAX_CPU_HOURS
 from pecli.scenario import load_scenario
-
-if TYPE_CHECKING:
-    from pecli.rl.selfplay import SelfPlay, SelfPlayState
 
 
 class ScheduleChoice(str, enum.Enum):
@@ -38,8 +36,8 @@ def selfplay(
     cpu_hours: Annotated[
         float | None,
         typer.Option("--cpu-hours", help="Stop after the first round at which the run's CPU time (both sides' turns) "
-                     "reaches this many hours; --rounds stays the ceiling. With --resume: a larger budget continues "
-                     "the run."),
+                     "reaches this many hours; --rounds stays the ceiling. The run keeps it: --resume continues to "
+                     "it, or to a new one given here."),
     ] = None,
     steps_per_round: Annotated[
         int | None, typer.Option("--steps-per-round", help="Learner transitions per side per round (default: the config's).")
@@ -84,13 +82,14 @@ def selfplay(
     [bold]training.selfplay[/] section.
     """
     from pecli.rl.algorithms import torch_device
-    from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
+    from pecli.rl.averaging import averaged_from
+    from pecli.rl.selfplay import KEEP, SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
 
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
-    if cpu_hours is not None and not 0 < cpu_hours < math.inf:
-        raise PecliError(f"--cpu-hours must be a positive number of hours, not {cpu_hours}")
+    if cpu_hours is not None and not (math.isfinite(cpu_hours) and 0 < cpu_hours <= MAX_CPU_HOURS):
+        raise PecliError(f"--cpu-hours must be a number of hours above 0 and at most {MAX_CPU_HOURS:,}, not {cpu_hours}")
     settings = parse_overrides(overrides or [])
     for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
                        ("algo", algo.value if algo else None),
@@ -114,11 +113,6 @@ def selfplay(
         if rounds is not None and rounds < played:
             raise PecliError(f"run '{name}' has played {played} rounds already: --rounds must be at least that")
         seed = state.seed
-        if cpu_hours is not None and (spent := _spent_by_last_round(state)) >= cpu_hours * 3600:
-            err_console.print(f"run '{name}' has used {spent / 3600:.3g} CPU-hours already, --cpu-hours "
-                              f"{cpu_hours:g}: nothing to train (a larger --cpu-hours continues it)", highlight=False)
-            _hand_over(run.path, state)
-            return
     else:
         scenario = load_scenario(config or "paper")
         seed = 0 if seed is None else seed
@@ -133,56 +127,35 @@ def selfplay(
         resume=resume,
         progress=not quiet and err_console.is_terminal,
         device=device,
+        cpu_hours=KEEP if cpu_hours is None else cpu_hours,
     )
-
-    def spent() -> str:  # how much of the budget the run has used, after each round's line
-        return "" if cpu_hours is None else f", {loop.state.cpu_seconds() / 3600:.3g} of {cpu_hours:g} CPU-hours"
 
     try:
         with sigterm_stops():
-            loop = SelfPlay(job, report=lambda line: err_console.print(line + spent(), highlight=False))
-            budget = "" if cpu_hours is None else f" or {cpu_hours:g} CPU-hours, whichever comes first,"
+            loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
+            before = len(loop.state.turns)
+            used = f" ({loop.state.cpu_seconds() / 3600:.2f} used)" if loop.state.turns else ""
+            budget = "" if loop.state.cpu_hours is None else f" or {loop.state.cpu_hours:g} CPU-h{used}, whichever comes first,"
             err_console.print(
                 f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side"
                 f"{budget} on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
                 + f", belief {scenario.training.belief}", highlight=False)
-            loop.run(after_round=None if cpu_hours is None else lambda r: _within(loop, r, cpu_hours))
+            final = loop.run()
     except SelfPlayInterrupted as stop:
         err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
-    _hand_over(loop.run_dir.path, loop.state)
-
-
-def _spent_by_last_round(state: SelfPlayState) -> float:
-    """CPU seconds of the run through its last round that both main learners finished (what a budget is checked
-    against: a half-played round never ends a run)."""
-    whole = [r for r in {t.round for t in state.turns} if all(state.done(r, role) for role in ("pursuer", "evader"))]
-    return state.cpu_seconds(through=max(whole, default=0))
-
-
-def _within(loop: SelfPlay, r: int, cpu_hours: float) -> bool:
-    """After round ``r``: whether the run is still inside its CPU budget (if not, say so: the run stops)."""
-    spent = loop.state.cpu_seconds(through=r)
-    if spent < cpu_hours * 3600:
-        return True
-    err_console.print(f"budget reached: {spent / 3600:.3g} CPU-hours (--cpu-hours {cpu_hours:g}) after round {r}", highlight=False)
-    return False
-
-
-def _hand_over(run: Path, state: SelfPlayState) -> None:
-    """Name each side's newest checkpoint in ``run`` and the average the run hands over."""
-    from pecli.rl.averaging import averaged_from
-    from pecli.rl.selfplay import AVERAGE_FILE
-
-    for role in ("pursuer", "evader"):
-        if (turn := state.latest(role)) is None:
-            continue
-        average = run / role / AVERAGE_FILE
-        rounds = len(averaged_from(average) or []) if average.is_file() else 0
+    if len(loop.state.turns) == before:
+        limits = [flag for flag, reached in (("--cpu-hours", loop.state.budget_reached()),
+                                             ("--rounds", loop.state.whole_rounds() >= sp.rounds)) if reached]
+        err_console.print(f"nothing to train: a larger {' and '.join(limits) or '--rounds'} continues the run",
+                          highlight=False)
+    averages = loop.averages()
+    for role, path in final.items():
+        rounds = len(averaged_from(averages[role]) or []) if role in averages else 0
         what = "its last round" if rounds == 1 else f"the mean of its last {rounds} rounds"
-        handed = f"; to hand over: {average} ({what})" if rounds else ""
-        err_console.print(f"[green]done[/]: {role} {run / turn.checkpoint}{handed}", highlight=False, soft_wrap=True)
+        average = f"; to hand over: {averages[role]} ({what})" if rounds else ""
+        err_console.print(f"[green]done[/]: {role} {path}{average}", highlight=False, soft_wrap=True)
 
 
 def _get(data: dict, dotted: str) -> object:

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from pecli.experiment.spec import RunSpec
+from pecli.rl.budget import budget_reached, whole_rounds
 from pecli.zoo import FINAL, RESUME_DIR
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
@@ -61,14 +62,13 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     planned = run.scenario.training.selfplay.rounds
     state = _read_json(folder / SELFPLAY_STATE) or {}
     turns = state.get("turns", [])
-    finished = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}  # not exploiters
-    rounds = sum(all((r, role) in finished for role in run.roles) for r in range(1, planned + 1))
+    rounds = min(whole_rounds(turns), planned)
     cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
-    done = rounds == planned or (run.cpu_hours is not None and rounds > 0
-                                 and cpu_through(turns, rounds) >= run.cpu_hours * 3600)
+    done = rounds == planned or budget_reached(turns, run.cpu_hours)
     role = ""
     if not done:
-        role = "pursuer" if (rounds + 1, "pursuer") not in finished else "evader"
+        mains = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}
+        role = "evader" if (rounds + 1, "pursuer") in mains else "pursuer"
     return RunProgress(rounds, planned, steps, cpu, done, role)
 
 
@@ -92,12 +92,6 @@ def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, i
     return seconds, unknown
 
 
-def cpu_through(turns: list[dict[str, Any]], round: int) -> float:
-    """CPU seconds of the turns (exploiters' included) of rounds 1 to ``round``: a CPU budget is checked
-    after each round against this, so a half-played round never ends a run."""
-    return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
-
-
 def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, Any]:
     """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
     or do nothing if it is finished. Returns what it did (``started``, ``resumed`` or ``finished``), with
@@ -119,7 +113,7 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, An
             # stopped between creating the run folder and writing its first state: nothing was trained
             shutil.rmtree(folder)
         SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
-                             progress=progress)).run(after_round=lambda _: not run_progress(run, zoo).done)
+                             progress=progress, cpu_hours=run.cpu_hours)).run()
     else:
         resume = (folder / "config.yaml").is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]

@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
 from pecli.match import MAX_EPISODES
+from pecli.rl.budget import MAX_CPU_HOURS
 from pecli.roles import Role
 from pecli.scenario import (
     Scenario,
@@ -85,7 +86,7 @@ class RunGrid(_Model):
     rounds: int | None = Field(default=None, ge=1, description="self-play rounds (default: the scenario's)")
     steps_per_round: int | None = Field(default=None, ge=1, description="self-play transitions per side per round")
     steps: int | None = Field(default=None, ge=1, description="budget of pursuer/evader runs (default: the scenario's)")
-    cpu_hours: float | None = Field(default=None, gt=0, le=10_000, allow_inf_nan=False,
+    cpu_hours: float | None = Field(default=None, gt=0, le=MAX_CPU_HOURS, allow_inf_nan=False,
                                     description="self-play runs: stop after the first round at which the run's CPU time "
                                     "(every turn's, exploiters' included) reaches this; rounds is then a ceiling")
 

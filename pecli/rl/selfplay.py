@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch as th
@@ -44,6 +44,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
+from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints, averaged_from
 from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
@@ -65,6 +66,7 @@ from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 from wrappers.simultaneous import SimultaneousGame
 
 STATE_FILE = "selfplay.json"
+KEEP = "keep"  # SelfPlayJob.cpu_hours: a resumed run keeps its own budget
 AVERAGE_FILE = "average.zip"  # per main learner: the mean of its last rounds, what a run hands over
 
 
@@ -88,6 +90,8 @@ class SelfPlayJob:
     resume: bool = False
     progress: bool = True
     device: str = "cpu"  # where the networks train: cpu, cuda or auto
+    cpu_hours: float | None | Literal["keep"] = KEEP  # the run's CPU budget (pecli.rl.budget), None for none, or
+    # KEEP: a resumed run's own (none for a new run)
 
 
 @dataclass
@@ -120,6 +124,7 @@ class SelfPlayState:
     curriculum_steps: int  # the span the curriculum is scheduled over (fixed when the run starts)
     pools: dict[str, OpponentPool]
     turns: list[Turn] = field(default_factory=list)
+    cpu_hours: float | None = None  # the CPU budget: the run stops after the first round that reaches it
 
     def done(self, round: int, role: Role, learner: str = MAIN) -> bool:
         return any(t.round == round and t.role == role and t.learner == learner for t in self.turns)
@@ -132,12 +137,24 @@ class SelfPlayState:
         """CPU seconds of the finished turns (exploiters' included), of rounds 1 to ``through`` if given."""
         return sum(t.cpu_seconds for t in self.turns if through is None or t.round <= through)
 
+    def whole_rounds(self) -> int:
+        """How many rounds, from round 1 on, both main learners have finished."""
+        return budget.whole_rounds(self._records())
+
+    def budget_reached(self) -> bool:
+        """Whether the run's CPU budget is spent by its last whole round (:mod:`pecli.rl.budget`)."""
+        return budget.budget_reached(self._records(), self.cpu_hours)
+
+    def _records(self) -> list[dict[str, Any]]:
+        return [asdict(t) for t in self.turns]
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "seed": self.seed,
             "curriculum_steps": self.curriculum_steps,
             "pools": {role: pool.to_dict() for role, pool in self.pools.items()},
-            "turns": [asdict(t) for t in self.turns],
+            "turns": self._records(),
+            "cpu_hours": self.cpu_hours,
         }
 
     @classmethod
@@ -147,6 +164,7 @@ class SelfPlayState:
             curriculum_steps=int(data["curriculum_steps"]),
             pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
             turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
+            cpu_hours=data.get("cpu_hours"),  # absent in a record older than budgets
         )
 
 
@@ -256,9 +274,12 @@ class SelfPlay:
             self.run_dir.log_command()
             if self.run_dir.scenario() != job.scenario:  # more rounds: the run's config says so from now on
                 self.run_dir.write_config(job.scenario)
+            if job.cpu_hours != KEEP and job.cpu_hours != self.state.cpu_hours:  # a new budget replaces its own
+                self.state.cpu_hours = job.cpu_hours
+                self._save_state()
         else:
             Run.check_new(job.zoo, job.name)
-            self.state = initial_state(job.scenario, job.seed)
+            self.state = replace(initial_state(job.scenario, job.seed), cpu_hours=None if job.cpu_hours == KEEP else job.cpu_hours)
             self.run_dir = Run.create(job.zoo, job.name, job.scenario, {"command": "selfplay", "seed": job.seed})
             self._save_state()
         self._policies: dict[tuple[Role, str], Policy] = {}
@@ -307,7 +328,12 @@ class SelfPlay:
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
-        """Play the rounds not yet played; ``after_round(r)`` returning False stops after round ``r``."""
+        """Play the rounds not yet played, until the last or the run's CPU budget; ``after_round(r)`` returning
+        False stops after round ``r``."""
+        if self.state.budget_reached():  # nothing to load or play
+            self.report(self._budget_line())
+            self._write_averages()
+            return self._latest()
         th.set_num_threads(self.scenario.training.torch_threads)
         simultaneous = self.settings.schedule == "simultaneous"
         games = None
@@ -331,10 +357,21 @@ class SelfPlay:
                         self._turn(r, role, kind)
             self._write_averages()
             self.report(self._summary(r))
+            if self.state.budget_reached():
+                self.report(self._budget_line())
+                break
             if after_round is not None and not after_round(r):
                 break
         self._write_averages()  # a run stopped between a round's record and its averages catches up here
+        return self._latest()
+
+    def _latest(self) -> dict[Role, Path]:
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
+
+    def _budget_line(self) -> str:
+        rounds = self.state.whole_rounds()
+        return (f"budget reached: {self.state.cpu_seconds(through=rounds) / 3600:.2f} of {self.state.cpu_hours:g} "
+                f"CPU-h after round {rounds}")
 
     def averages(self) -> dict[Role, Path]:
         """Each main learner's ``average.zip`` (the mean of its last ``average_last`` rounds), where there is one."""
@@ -607,4 +644,6 @@ class SelfPlay:
                 parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}{tried}"
                              + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
-        return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s)"
+        used = "" if self.state.cpu_hours is None else \
+            f"; {self.state.cpu_seconds() / 3600:.2f} of {self.state.cpu_hours:g} CPU-h"
+        return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s{used})"

@@ -363,8 +363,10 @@ def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None
     assert "budget reached: 0.00 of 1e-09 CPU-h after round 1" in result.output and "round 2/3" not in result.output
     assert "to hand over" in result.output and json.loads(state_file.read_text())["cpu_hours"] == 1e-9
     resume = ["selfplay", "--zoo", str(tmp_path), "--name", "cpu", "--resume", "-q"]
+    (tmp_path / "cpu" / "pursuer" / "average.zip").unlink()  # as if stopped before writing it
     result = invoke(*resume)  # the run keeps its budget
     assert result.exit_code == 0, result.output
+    assert (tmp_path / "cpu" / "pursuer" / "average.zip").is_file()  # caught up, with nothing trained
     assert "nothing to train: a larger --cpu-hours continues the run" in result.output and "to hand over" in result.output
     assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
     result = invoke(*resume, "--cpu-hours", "1000")  # a new budget replaces it: on to the ceiling of rounds

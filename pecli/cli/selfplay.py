@@ -146,10 +146,10 @@ def selfplay(
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
     if len(loop.state.turns) == before:
-        limits = [flag for flag, reached in (("--cpu-hours", loop.state.budget_reached()),
-                                             ("--rounds", loop.state.whole_rounds() >= sp.rounds)) if reached]
-        err_console.print(f"nothing to train: a larger {' and '.join(limits) or '--rounds'} continues the run",
-                          highlight=False)
+        limits = [flag for flag, reached in (("--cpu-hours", loop.budget_reached()),
+                                             ("--rounds", loop.whole_rounds() >= sp.rounds)) if reached]
+        verb = "continue" if len(limits) > 1 else "continues"
+        err_console.print(f"nothing to train: a larger {' and '.join(limits) or '--rounds'} {verb} the run", highlight=False)
     averages = loop.averages()
     for role, path in final.items():
         rounds = len(averaged_from(averages[role]) or []) if role in averages else 0

@@ -62,9 +62,10 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     planned = run.scenario.training.selfplay.rounds
     state = _read_json(folder / SELFPLAY_STATE) or {}
     turns = state.get("turns", [])
-    rounds = min(whole_rounds(turns), planned)
+    settings = run.scenario.training.selfplay
+    rounds = min(whole_rounds(turns, settings), planned)
     cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
-    done = rounds == planned or budget_reached(turns, run.cpu_hours)
+    done = rounds == planned or budget_reached(turns, run.cpu_hours, settings)
     role = ""
     if not done:
         mains = {(t.get("round"), t.get("role")) for t in turns if t.get("learner", "main") == "main"}

@@ -1,29 +1,25 @@
 """A self-play run's CPU budget, read from its turns: one rule for ``pecli selfplay`` and ``pecli experiment``.
 
 A run stops after the first round at which its recorded CPU time (every turn's, exploiters' included) reaches
-its budget. Only whole rounds count, those both main learners finished, so a half-played round never ends a run.
-The functions read the turns as ``selfplay.json`` stores them (dicts), so the experiment's status needs no torch.
+its budget. Only whole rounds count, those with every turn recorded (both main learners' and the league
+exploiters' scheduled in them), so a half-played round never ends a run. The functions read the turns as
+``selfplay.json`` stores them (dicts), so the experiment's status needs no torch.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-MAIN = "main"  # pecli.rl.pool.MAIN
-MAIN_ROLES = ("pursuer", "evader")
+from pecli.rl.pool import EXPLOITER, MAIN
+from pecli.roles import ROLES
+
+if TYPE_CHECKING:
+    from pecli.scenario import SelfPlay as SelfPlaySettings
+
 MAX_CPU_HOURS = 10_000  # the largest budget a run takes (pecli selfplay --cpu-hours, an experiment's runs.cpu_hours)
 
 Turns = Sequence[Mapping[str, Any]]
-
-
-def whole_rounds(turns: Turns) -> int:
-    """How many rounds, from round 1 on, both main learners have finished."""
-    done = {(int(t.get("round", 0)), t.get("role")) for t in turns if t.get("learner", MAIN) == MAIN}
-    rounds = 0
-    while all((rounds + 1, role) in done for role in MAIN_ROLES):
-        rounds += 1
-    return rounds
 
 
 def cpu_through(turns: Turns, round: int) -> float:
@@ -31,9 +27,29 @@ def cpu_through(turns: Turns, round: int) -> float:
     return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
 
 
-def budget_reached(turns: Turns, cpu_hours: float | None) -> bool:
+def scheduled_turns(settings: SelfPlaySettings, turns: Turns, round: int) -> list[tuple[str, str]]:
+    """The ``(learner, role)`` turns of ``round``: both main learners, then the sides of ``league_exploiter_roles``
+    in every ``league_exploiter_every``-th round of a league (never if 0), once the rounds before it spent
+    ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""
+    every = settings.league_exploiter_every if settings.opponents == "league" else 0
+    exploiters = bool(every) and round % every == 0 and \
+        cpu_through(turns, round - 1) >= 3600.0 * settings.league_exploiter_after
+    return [(MAIN, role) for role in ROLES] + \
+        [(EXPLOITER, role) for role in ROLES if exploiters and role in settings.league_exploiter_roles]
+
+
+def whole_rounds(turns: Turns, settings: SelfPlaySettings) -> int:
+    """How many rounds, from round 1 on, have all their scheduled turns recorded."""
+    done = {(int(t.get("round", 0)), t.get("learner", MAIN), t.get("role")) for t in turns}
+    rounds = 0
+    while all((rounds + 1, *turn) in done for turn in scheduled_turns(settings, turns, rounds + 1)):
+        rounds += 1
+    return rounds
+
+
+def budget_reached(turns: Turns, cpu_hours: float | None, settings: SelfPlaySettings) -> bool:
     """Whether a run of budget ``cpu_hours`` (``None``: none) is over it after its last whole round."""
     if cpu_hours is None:
         return False
-    rounds = whole_rounds(turns)
+    rounds = whole_rounds(turns, settings)
     return rounds > 0 and cpu_through(turns, rounds) >= cpu_hours * 3600

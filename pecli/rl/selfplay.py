@@ -137,15 +137,8 @@ class SelfPlayState:
         """CPU seconds of the finished turns (exploiters' included), of rounds 1 to ``through`` if given."""
         return sum(t.cpu_seconds for t in self.turns if through is None or t.round <= through)
 
-    def whole_rounds(self) -> int:
-        """How many rounds, from round 1 on, both main learners have finished."""
-        return budget.whole_rounds(self._records())
-
-    def budget_reached(self) -> bool:
-        """Whether the run's CPU budget is spent by its last whole round (:mod:`pecli.rl.budget`)."""
-        return budget.budget_reached(self._records(), self.cpu_hours)
-
-    def _records(self) -> list[dict[str, Any]]:
+    def records(self) -> list[dict[str, Any]]:
+        """The turns as ``selfplay.json`` stores them (what :mod:`pecli.rl.budget` reads)."""
         return [asdict(t) for t in self.turns]
 
     def to_dict(self) -> dict[str, Any]:
@@ -153,7 +146,7 @@ class SelfPlayState:
             "seed": self.seed,
             "curriculum_steps": self.curriculum_steps,
             "pools": {role: pool.to_dict() for role, pool in self.pools.items()},
-            "turns": self._records(),
+            "turns": self.records(),
             "cpu_hours": self.cpu_hours,
         }
 
@@ -330,7 +323,7 @@ class SelfPlay:
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
         """Play the rounds not yet played, until the last or the run's CPU budget; ``after_round(r)`` returning
         False stops after round ``r``."""
-        if self.state.budget_reached():  # nothing to load or play
+        if self.budget_reached():  # nothing to load or play
             self.report(self._budget_line())
             self._write_averages()
             return self._latest()
@@ -344,9 +337,9 @@ class SelfPlay:
             placeholder = None if simultaneous else self._mixed(opponent_of(role))
             view = games.faces[role] if games is not None else None
             self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
+        records = self.state.records()
         for r in range(1, self.settings.rounds + 1):
-            exploiters = self._exploiters(r)
-            turns = [(MAIN, role) for role in ROLES] + [(EXPLOITER, role) for role in ROLES if role in exploiters]
+            turns = budget.scheduled_turns(self.settings, records, r)
             if all(self.state.done(r, role, kind) for kind, role in turns):
                 continue
             if games is not None:
@@ -355,9 +348,10 @@ class SelfPlay:
                 for kind, role in turns:  # the main agents first: the exploiters then train against the new ones
                     if not self.state.done(r, role, kind):
                         self._turn(r, role, kind)
+            records = self.state.records()
             self._write_averages()
             self.report(self._summary(r))
-            if self.state.budget_reached():
+            if self.budget_reached():
                 self.report(self._budget_line())
                 break
             if after_round is not None and not after_round(r):
@@ -368,8 +362,16 @@ class SelfPlay:
     def _latest(self) -> dict[Role, Path]:
         return {role: self.run_dir.path / self.state.latest(role).checkpoint for role in ROLES}
 
+    def whole_rounds(self) -> int:
+        """How many rounds, from round 1 on, have all their turns recorded (:mod:`pecli.rl.budget`)."""
+        return budget.whole_rounds(self.state.records(), self.settings)
+
+    def budget_reached(self) -> bool:
+        """Whether the run's CPU budget is spent by its last whole round (:mod:`pecli.rl.budget`)."""
+        return budget.budget_reached(self.state.records(), self.state.cpu_hours, self.settings)
+
     def _budget_line(self) -> str:
-        rounds = self.state.whole_rounds()
+        rounds = self.whole_rounds()
         return (f"budget reached: {self.state.cpu_seconds(through=rounds) / 3600:.2f} of {self.state.cpu_hours:g} "
                 f"CPU-h after round {rounds}")
 
@@ -392,17 +394,6 @@ class SelfPlay:
             out = self.run_dir.path / role / AVERAGE_FILE
             if paths and averaged_from(out) != [str(path) for path in paths]:
                 average_checkpoints(paths, out)
-
-    def _exploiters(self, r: int) -> list[Role]:
-        """The sides whose league exploiter trains in round ``r``: ``league_exploiter_roles`` in every
-        ``league_exploiter_every``-th round (never if 0, or outside a league), once the run's rounds before ``r``
-        spent ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""
-        sp = self.settings
-        every = sp.league_exploiter_every if sp.opponents == "league" else 0
-        if not every or r % every:
-            return []
-        spent = self.state.cpu_seconds(through=r - 1)
-        return list(sp.league_exploiter_roles) if spent >= 3600.0 * sp.league_exploiter_after else []
 
     def _joint_round(self, r: int, games: SimultaneousGame) -> None:
         """Round ``r`` of the simultaneous schedule: both learners in the same games for ``steps_per_round``

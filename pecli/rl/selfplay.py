@@ -157,7 +157,7 @@ class SelfPlayState:
             curriculum_steps=int(data["curriculum_steps"]),
             pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
             turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
-            cpu_hours=data.get("cpu_hours"),  # absent in a record older than budgets
+            cpu_hours=None if data.get("cpu_hours") is None else float(data["cpu_hours"]),  # absent in older records
         )
 
 

@@ -345,6 +345,8 @@ def report(args: argparse.Namespace) -> None:
               f"{hours['none']:.2f} CPU-h on average: z-test p = {p:.2g} "
               f"({'met' if better else 'NOT met'}: bimdn must capture more, p < 0.05)")
         print(f"  per run (the training seed as the unit): {seed_level(faced, bimdn, none, common)}")
+        if not better:
+            missed.append(f"{schedule}: bimdn pursuers capture more than none (z-test p = {p:.2g})")
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
 
 

@@ -22,8 +22,8 @@ MAX_CPU_HOURS = 10_000  # the largest budget a run takes (pecli selfplay --cpu-h
 Turns = Sequence[Mapping[str, Any]]
 
 
-def cpu_through(turns: Turns, round: int) -> float:
-    """CPU seconds of the turns (exploiters' included) of rounds 1 to ``round``."""
+def cpu_through(turns: Turns, round: float) -> float:
+    """CPU seconds of the turns (exploiters' included) of rounds 1 to ``round`` (``math.inf``: all)."""
     return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
 
 

@@ -28,6 +28,7 @@ learner's newest commit: at most one checkpoint interval is lost.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -135,7 +136,7 @@ class SelfPlayState:
 
     def cpu_seconds(self, through: int | None = None) -> float:
         """CPU seconds of the finished turns (exploiters' included), of rounds 1 to ``through`` if given."""
-        return sum(t.cpu_seconds for t in self.turns if through is None or t.round <= through)
+        return budget.cpu_through(self.records(), math.inf if through is None else through)
 
     def records(self) -> list[dict[str, Any]]:
         """The turns as ``selfplay.json`` stores them (what :mod:`pecli.rl.budget` reads)."""

@@ -407,10 +407,14 @@ def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:
 
 def ray_processes(group: int | None = None) -> list[str]:
     """Ray's processes alive in process group ``group`` (default: this one's, where an embedded Ray starts its
-    GCS, raylet and agents; its workers end with the raylet), as ``ps`` lines ``pid ppid pgid args``."""
+    GCS, raylet and agents; its workers end with the raylet), as ``ps`` lines ``pid ppid pgid stat args``.
+
+    A zombie (``stat`` Z: exited, not yet reaped) is not alive: a container whose PID 1 reaps orphans late keeps
+    a dead raylet in ``ps`` as ``[raylet] <defunct>`` for a while."""
     group = os.getpgrp() if group is None else group
-    out = subprocess.run(["ps", "-eo", "pid,ppid,pgid,args"], capture_output=True, text=True).stdout
+    out = subprocess.run(["ps", "-eo", "pid,ppid,pgid,stat,args"], capture_output=True, text=True).stdout
     return [line for line in out.splitlines()[1:] if int(line.split()[2]) == group
+            and not line.split()[3].startswith("Z")
             and ("raylet" in line or "gcs_server" in line or "ray::" in line)]
 
 

@@ -22,6 +22,7 @@ from pecli.experiment.runs import SELFPLAY_STATE, run_progress
 from pecli.experiment.spec import RunSpec, experiment_from_dict
 from pecli.rl.train import with_overrides
 from pecli.scenario import load_scenario
+from pecli.zoo import read_metadata
 
 from conftest import hold
 
@@ -321,7 +322,7 @@ def test_the_ranking_draws_its_pairings_over_runs_in_the_grids_own_order() -> No
 @pytest.mark.parametrize("schedule", ["selfplay", "league"])
 def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path, schedule: str) -> None:
     """A run whose budget is spent in round 1 stops there, well below its ceiling of 3 rounds, and a second
-    call (a retried task) does nothing."""
+    call (a retried task) trains nothing and only writes the averages a stop left behind."""
     from pecli.experiment.runs import execute_run
 
     data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
@@ -332,7 +333,12 @@ def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path,
     turns = json.loads((tmp_path / run.name / SELFPLAY_STATE).read_text())["turns"]
     assert {t["round"] for t in turns} == {1}
     assert {t.get("learner", "main") for t in turns} == ({"main", "exploiter"} if schedule == "league" else {"main"})
+    average = tmp_path / run.name / "pursuer" / "average.zip"
+    written = read_metadata(average).averaged
+    average.unlink()  # as if the worker stopped after round 1 was recorded, before its averages were written
+    state = (tmp_path / run.name / SELFPLAY_STATE).read_bytes()
     assert execute_run(run, tmp_path)["did"] == "finished"
+    assert read_metadata(average).averaged == written and (tmp_path / run.name / SELFPLAY_STATE).read_bytes() == state
 
 
 class InlineCluster:

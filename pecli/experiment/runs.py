@@ -4,7 +4,7 @@ progress from its files.
 A run is a self-play run (:class:`pecli.rl.selfplay.SelfPlay`) or a one-role run
 (:func:`pecli.rl.train.train`) in the experiment's zoo, ``<out>/zoo/<run>``. Both commit a durable
 state at every checkpoint, so :func:`execute_run` continues whatever a stop left (Ctrl-C, a killed
-driver, a lost worker) and does nothing for a finished run: it is safe to call again, which is what a
+driver, a lost worker) and trains nothing for a finished run: it is safe to call again, which is what a
 retried task does.
 """
 
@@ -20,7 +20,7 @@ from typing import Any
 
 from pecli.experiment.spec import RunSpec
 from pecli.rl.budget import budget_reached, whole_rounds
-from pecli.zoo import FINAL, RESUME_DIR
+from pecli.zoo import FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
 SELFPLAY_STATE = "selfplay.json"  # pecli.rl.selfplay.STATE_FILE (importing that module loads torch)
@@ -95,11 +95,12 @@ def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, i
 
 def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, Any]:
     """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
-    or do nothing if it is finished. Returns what it did (``started``, ``resumed`` or ``finished``), with
-    the CPU seconds of this call and the run's progress. ``progress`` shows the trainers' own progress."""
+    or, for a finished run, train nothing (a self-play run's averages are written if a stop left them behind).
+    Returns what it did (``started``, ``resumed`` or ``finished``), with the CPU seconds of this call and the
+    run's progress. ``progress`` shows the trainers' own progress."""
     import torch
 
-    from pecli.rl.selfplay import SelfPlay, SelfPlayJob
+    from pecli.rl.selfplay import SelfPlay, SelfPlayJob, read_state, write_averages
     from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, train
 
     torch.set_num_threads(run.scenario.training.torch_threads)
@@ -107,6 +108,9 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, An
     before = run_progress(run, zoo)
     folder = zoo / run.name
     if before.done:
+        if run.selfplay:  # a worker stopped between the last round's record and its averages: write them
+            run_dir = Run.open(zoo, run.name)
+            write_averages(run_dir, read_state(run_dir), run.scenario)
         return {"did": "finished", "cpu_seconds": 0.0, "progress": before.to_dict()}
     if run.selfplay:
         resume = (folder / SELFPLAY_STATE).is_file()

@@ -173,6 +173,23 @@ def read_state(run: Run) -> SelfPlayState:
         raise PecliError(f"{path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
 
 
+def write_averages(run: Run, state: SelfPlayState, scenario: Scenario) -> None:
+    """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds played wholly on the
+    real game (after the curriculum; the newest round alone while it runs), unless it holds them already (then
+    this only reads its metadata). A run stopped between a round's record and its averages catches up here."""
+    last = scenario.training.selfplay.average_last
+    curriculum = scenario.training.curriculum
+    eased = curriculum.span(state.curriculum_steps) if curriculum.enabled else 0  # transitions per learner
+    for role in ROLES if last else ():
+        turns = sorted((t for t in state.turns if t.role == role and t.learner == MAIN), key=lambda t: t.round)
+        started = [0, *(turn.steps for turn in turns)]  # the learner's transitions when each turn began
+        real = [turn for turn, steps in zip(turns, started) if steps >= eased] or turns[-1:]
+        paths = [run.path / turn.checkpoint for turn in real[-last:]]
+        out = run.path / role / AVERAGE_FILE
+        if paths and averaged_from(out) != [str(path) for path in paths]:
+            average_checkpoints(paths, out)
+
+
 def tensorboard_name(role: Role, kind: str, r: int) -> str:
     """The TensorBoard run a turn logs to, under the run's ``tb/``: one per main learner (``pursuer_0``), and one
     per exploiter turn (``exploiter-pursuer/r007_0``), since an exploiter that joined its pool starts again
@@ -326,7 +343,7 @@ class SelfPlay:
         False stops after round ``r``."""
         if self.budget_reached():  # nothing to load or play
             self.report(self._budget_line())
-            self._write_averages()
+            write_averages(self.run_dir, self.state, self.scenario)
             return self._latest()
         th.set_num_threads(self.scenario.training.torch_threads)
         simultaneous = self.settings.schedule == "simultaneous"
@@ -350,14 +367,14 @@ class SelfPlay:
                     if not self.state.done(r, role, kind):
                         self._turn(r, role, kind)
             records = self.state.records()
-            self._write_averages()
+            write_averages(self.run_dir, self.state, self.scenario)
             self.report(self._summary(r))
             if self.budget_reached():
                 self.report(self._budget_line())
                 break
             if after_round is not None and not after_round(r):
                 break
-        self._write_averages()  # a run stopped between a round's record and its averages catches up here
+        write_averages(self.run_dir, self.state, self.scenario)  # catches up after a stop before a round's averages
         return self._latest()
 
     def _latest(self) -> dict[Role, Path]:
@@ -380,21 +397,6 @@ class SelfPlay:
         """Each main learner's ``average.zip`` (the mean of its last ``average_last`` rounds), where there is one."""
         paths = {role: self.run_dir.path / role / AVERAGE_FILE for role in ROLES}
         return {role: path for role, path in paths.items() if path.is_file()}
-
-    def _write_averages(self) -> None:
-        """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds played wholly on the
-        real game (after the curriculum; the newest round alone while it runs), unless it holds them."""
-        last = self.settings.average_last
-        curriculum = self.scenario.training.curriculum
-        eased = curriculum.span(self.state.curriculum_steps) if curriculum.enabled else 0  # transitions per learner
-        for role in ROLES if last else ():
-            turns = sorted((t for t in self.state.turns if t.role == role and t.learner == MAIN), key=lambda t: t.round)
-            started = [0, *(turn.steps for turn in turns)]  # the learner's transitions when each turn began
-            real = [turn for turn, steps in zip(turns, started) if steps >= eased] or turns[-1:]
-            paths = [self.run_dir.path / turn.checkpoint for turn in real[-last:]]
-            out = self.run_dir.path / role / AVERAGE_FILE
-            if paths and averaged_from(out) != [str(path) for path in paths]:
-                average_checkpoints(paths, out)
 
     def _joint_round(self, r: int, games: SimultaneousGame) -> None:
         """Round ``r`` of the simultaneous schedule: both learners in the same games for ``steps_per_round``

@@ -18,11 +18,12 @@ from typer.testing import CliRunner
 from pecli.cli import app
 from pecli.errors import ConfigError, PecliError
 from pecli.experiment import ExperimentRunner, builtin_experiments, load_experiment
-from pecli.experiment.runs import SELFPLAY_STATE, run_progress
+from pecli.experiment.runs import SELFPLAY_STATE, averages_behind, run_progress
 from pecli.experiment.spec import RunSpec, experiment_from_dict
+from pecli.rl.handover import averaged_from
 from pecli.rl.train import with_overrides
 from pecli.scenario import load_scenario
-from pecli.zoo import read_metadata
+from pecli.zoo import metadata_path
 
 from conftest import hold
 
@@ -322,7 +323,7 @@ def test_the_ranking_draws_its_pairings_over_runs_in_the_grids_own_order() -> No
 @pytest.mark.parametrize("schedule", ["selfplay", "league"])
 def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path, schedule: str) -> None:
     """A run whose budget is spent in round 1 stops there, well below its ceiling of 3 rounds, and a second
-    call (a retried task) trains nothing and only writes the averages a stop left behind."""
+    call (a retried task) does nothing."""
     from pecli.experiment.runs import execute_run
 
     data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
@@ -333,12 +334,7 @@ def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path,
     turns = json.loads((tmp_path / run.name / SELFPLAY_STATE).read_text())["turns"]
     assert {t["round"] for t in turns} == {1}
     assert {t.get("learner", "main") for t in turns} == ({"main", "exploiter"} if schedule == "league" else {"main"})
-    average = tmp_path / run.name / "pursuer" / "average.zip"
-    written = read_metadata(average).averaged
-    average.unlink()  # as if the worker stopped after round 1 was recorded, before its averages were written
-    state = (tmp_path / run.name / SELFPLAY_STATE).read_bytes()
     assert execute_run(run, tmp_path)["did"] == "finished"
-    assert read_metadata(average).averaged == written and (tmp_path / run.name / SELFPLAY_STATE).read_bytes() == state
 
 
 class InlineCluster:
@@ -391,6 +387,39 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     again._train(cluster)  # type: ignore[arg-type]
     assert cluster.trained[-1] == ("none-s0", None) and run_progress(run, tmp_path / "zoo").done
     assert [row.status for row in again.rows] == ["done"]
+
+
+def test_a_finished_runs_task_writes_the_averages_a_stop_left_behind_and_trains_nothing(tmp_path: Path) -> None:
+    """Stopped between a run's last round and its averages: the next session submits the finished run, whose
+    task writes them (counted as skipped: nothing is trained); once they are there, it is not submitted."""
+    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+            "runs": {**SMOKE["runs"], "rounds": 1}}
+    experiment = experiment_from_dict(data, "exp.yaml")
+    (run,) = experiment.runs()
+    zoo, cluster = tmp_path / "zoo", InlineCluster()
+
+    def train() -> ExperimentRunner:
+        runner = ExperimentRunner(experiment, tmp_path)
+        runner.prepare()
+        runner._train(cluster)  # type: ignore[arg-type]
+        runner._save(ended="done")  # the stages after training are not this test's
+        return runner
+
+    train()
+    average = zoo / run.name / "pursuer" / "average.zip"
+    written = averaged_from(average)
+    assert run_progress(run, zoo).done and written and not averages_behind(run, zoo)
+    average.unlink()
+    metadata_path(average).unlink()
+    assert averages_behind(run, zoo)
+    state = (zoo / run.name / SELFPLAY_STATE).read_bytes()
+    again = train()
+    assert len(cluster.trained) == 2 and cluster.outcomes[-1]["did"] == "finished"
+    assert (again.session.runs_skipped, again.session.runs_started, again.session.runs_resumed) == (1, 0, 0)
+    assert averaged_from(average) == written and (zoo / run.name / SELFPLAY_STATE).read_bytes() == state
+    assert not averages_behind(run, zoo) and [row.status for row in again.rows] == ["done"]
+    train()
+    assert len(cluster.trained) == 2  # nothing behind: not submitted
 
 
 def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:

@@ -82,7 +82,7 @@ def selfplay(
     [bold]training.selfplay[/] section.
     """
     from pecli.rl.algorithms import torch_device
-    from pecli.rl.averaging import averaged_from
+    from pecli.rl.handover import averaged_from
     from pecli.rl.selfplay import KEEP, SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run

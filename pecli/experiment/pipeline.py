@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from pecli.errors import PecliError
-from pecli.experiment.runs import RunProgress, run_progress
+from pecli.experiment.runs import RunProgress, averages_behind, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.roles import ROLES
@@ -282,7 +282,8 @@ class ExperimentRunner:
         # of the first seeds of the first schedule rather than all seeds of a few kinds
         for row in self.rows:
             task = self._task(row.run)
-            if row.progress.done or (task is not row.run and run_progress(task, self.zoo).done):
+            finished = row.progress.done or (task is not row.run and run_progress(task, self.zoo).done)
+            if finished and not averages_behind(row.run, self.zoo):
                 row.status = self._trained(row)
                 self.session.runs_skipped += 1
                 continue
@@ -308,6 +309,8 @@ class ExperimentRunner:
                             self.session.runs_started += 1
                         elif outcome["did"] == "resumed":
                             self.session.runs_resumed += 1
+                        else:  # finished before: its task only wrote the averages a stop left behind
+                            self.session.runs_skipped += 1
                     self._save()
                 started = False
                 for row in pending.values():

@@ -20,6 +20,7 @@ from typing import Any
 
 from pecli.experiment.spec import RunSpec
 from pecli.rl.budget import budget_reached, whole_rounds
+from pecli.rl.handover import stale_averages
 from pecli.zoo import FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
@@ -73,6 +74,18 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     return RunProgress(rounds, planned, steps, cpu, done, role)
 
 
+def averages_behind(run: RunSpec, zoo: Path) -> bool:
+    """Whether a self-play run's averages lag its rounds (a stop came between a round's record and them): its
+    task, even when the run is finished, has them to write (cheap: JSON files only)."""
+    state = _read_json(zoo / run.name / SELFPLAY_STATE) if run.selfplay else None
+    if state is None:
+        return False
+    try:
+        return bool(stale_averages(zoo / run.name, state["turns"], int(state["curriculum_steps"]), run.scenario))
+    except (KeyError, TypeError, ValueError):  # a damaged state: its trainer says so
+        return False
+
+
 def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, int]:
     """An estimate of the CPU seconds the unfinished runs still need: for each, the mean CPU time of the
     finished runs of its kind and schedule, less what it has used. Returns ``(seconds, runs)``, ``runs``
@@ -108,9 +121,12 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, An
     before = run_progress(run, zoo)
     folder = zoo / run.name
     if before.done:
-        if run.selfplay:  # a worker stopped between the last round's record and its averages: write them
+        if averages_behind(run, zoo):  # a stop came between the last round's record and its averages
             run_dir = Run.open(zoo, run.name)
-            write_averages(run_dir, read_state(run_dir), run.scenario)
+            try:
+                write_averages(run_dir, read_state(run_dir), run.scenario)
+            finally:
+                run_dir.close()
         return {"did": "finished", "cpu_seconds": 0.0, "progress": before.to_dict()}
     if run.selfplay:
         resume = (folder / SELFPLAY_STATE).is_file()

@@ -71,13 +71,3 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
     atomic_write_json(metadata_path(out), meta.to_dict())
     return meta
 
-
-def averaged_from(checkpoint: Path) -> list[str] | None:
-    """The checkpoints ``checkpoint`` is the mean of, as its metadata names them; ``None`` where it is missing
-    or its metadata does not read."""
-    if not checkpoint.is_file():
-        return None
-    try:
-        return read_metadata(checkpoint).averaged
-    except ZooError:
-        return None

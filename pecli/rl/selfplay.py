@@ -46,7 +46,7 @@ from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names
 from pecli.rl import budget
-from pecli.rl.averaging import average_checkpoints, averaged_from
+from pecli.rl.averaging import average_checkpoints
 from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
@@ -60,6 +60,7 @@ from pecli.rl.callbacks import (
 from pecli.rl.pool import EXPLOITER, MAIN, OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
+from pecli.rl.handover import AVERAGE_FILE, stale_averages
 from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, play_live, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
@@ -68,7 +69,6 @@ from wrappers.simultaneous import SimultaneousGame
 
 STATE_FILE = "selfplay.json"
 KEEP = "keep"  # SelfPlayJob.cpu_hours: a resumed run keeps its own budget
-AVERAGE_FILE = "average.zip"  # per main learner: the mean of its last rounds, what a run hands over
 
 
 class SelfPlayInterrupted(Exception):
@@ -174,20 +174,10 @@ def read_state(run: Run) -> SelfPlayState:
 
 
 def write_averages(run: Run, state: SelfPlayState, scenario: Scenario) -> None:
-    """Write each main learner's ``average.zip`` from its newest ``average_last`` rounds played wholly on the
-    real game (after the curriculum; the newest round alone while it runs), unless it holds them already (then
-    this only reads its metadata). A run stopped between a round's record and its averages catches up here."""
-    last = scenario.training.selfplay.average_last
-    curriculum = scenario.training.curriculum
-    eased = curriculum.span(state.curriculum_steps) if curriculum.enabled else 0  # transitions per learner
-    for role in ROLES if last else ():
-        turns = sorted((t for t in state.turns if t.role == role and t.learner == MAIN), key=lambda t: t.round)
-        started = [0, *(turn.steps for turn in turns)]  # the learner's transitions when each turn began
-        real = [turn for turn, steps in zip(turns, started) if steps >= eased] or turns[-1:]
-        paths = [run.path / turn.checkpoint for turn in real[-last:]]
-        out = run.path / role / AVERAGE_FILE
-        if paths and averaged_from(out) != [str(path) for path in paths]:
-            average_checkpoints(paths, out)
+    """Write each main learner's ``average.zip``, the mean of its newest rounds (:mod:`pecli.rl.handover`),
+    unless it holds them already."""
+    for role, inputs in stale_averages(run.path, state.records(), state.curriculum_steps, scenario).items():
+        average_checkpoints(inputs, run.path / role / AVERAGE_FILE)
 
 
 def tensorboard_name(role: Role, kind: str, r: int) -> str:

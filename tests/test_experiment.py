@@ -349,7 +349,7 @@ class InlineCluster:
         from pecli.experiment.runs import execute_run
 
         self.trained.append((run.name, run.cpu_hours))
-        self.outcomes.append(execute_run(run, zoo))
+        self.outcomes.append(execute_run(run, zoo.resolve()))  # as RayCluster hands it to its task
         return len(self.outcomes) - 1
 
     @staticmethod
@@ -389,17 +389,21 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     assert [row.status for row in again.rows] == ["done"]
 
 
-def test_a_finished_runs_task_writes_the_averages_a_stop_left_behind_and_trains_nothing(tmp_path: Path) -> None:
+def test_a_finished_runs_task_writes_the_averages_a_stop_left_behind_and_trains_nothing(tmp_path: Path,
+                                                                                        monkeypatch) -> None:
     """Stopped between a run's last round and its averages: the next session submits the finished run, whose
-    task writes them (counted as skipped: nothing is trained); once they are there, it is not submitted."""
+    task writes them (counted as skipped: nothing is trained); once they are there, it is not submitted, with
+    a relative --out too (the task writes absolute paths)."""
     data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
             "runs": {**SMOKE["runs"], "rounds": 1}}
     experiment = experiment_from_dict(data, "exp.yaml")
     (run,) = experiment.runs()
-    zoo, cluster = tmp_path / "zoo", InlineCluster()
+    monkeypatch.chdir(tmp_path)
+    out = Path("out")
+    zoo, cluster = out / "zoo", InlineCluster()
 
     def train() -> ExperimentRunner:
-        runner = ExperimentRunner(experiment, tmp_path)
+        runner = ExperimentRunner(experiment, out)
         runner.prepare()
         runner._train(cluster)  # type: ignore[arg-type]
         runner._save(ended="done")  # the stages after training are not this test's

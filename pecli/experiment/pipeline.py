@@ -13,8 +13,9 @@ Everything lives in ``out``::
         tournament/          the final tournament (pairing cache, results.json/csv, per-player heatmap)
         report.md, report.json, table.png     the report (:mod:`pecli.experiment.report`)
 
-Running it again on the same ``out`` continues it: finished runs are skipped, unfinished ones continue
-from their durable state, cached pairings are not played again.
+Running it again on the same ``out`` continues it: finished runs are skipped (a self-play run's task only
+writes the averages a stop left behind), unfinished ones continue from their durable state, cached pairings
+are not played again.
 """
 
 from __future__ import annotations

@@ -58,4 +58,5 @@ def stale_averages(folder: Path, turns: Turns, curriculum_steps: int, scenario: 
     wanted = averaged_rounds(turns, curriculum_steps, scenario)
     paths = {role: [folder / checkpoint for checkpoint in checkpoints] for role, checkpoints in wanted.items()}
     return {role: inputs for role, inputs in paths.items()
-            if averaged_from(folder / role / AVERAGE_FILE) != [str(path) for path in inputs]}
+            if [Path(path).resolve() for path in averaged_from(folder / role / AVERAGE_FILE) or []]
+            != [path.resolve() for path in inputs]}  # resolved: a driver's relative --out, a Ray task's absolute one

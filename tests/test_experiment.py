@@ -42,9 +42,6 @@ def write(tmp_path: Path, data: dict) -> Path:
 
 
 def test_builtin_experiments() -> None:
-    from pecli.rl.selfplay import STATE_FILE
-
-    assert SELFPLAY_STATE == STATE_FILE
     assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
             "strength-exploiters", "strength-joingames", "strength-share", "strength-lite"} <= set(
         builtin_experiments())

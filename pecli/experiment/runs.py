@@ -20,11 +20,10 @@ from typing import Any
 
 from pecli.experiment.spec import RunSpec
 from pecli.rl.budget import budget_reached, whole_rounds
-from pecli.rl.handover import stale_averages
+from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE, stale_averages
 from pecli.zoo import FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
-SELFPLAY_STATE = "selfplay.json"  # pecli.rl.selfplay.STATE_FILE (importing that module loads torch)
 
 
 @dataclass

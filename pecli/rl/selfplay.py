@@ -60,14 +60,13 @@ from pecli.rl.callbacks import (
 from pecli.rl.pool import EXPLOITER, MAIN, OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
-from pecli.rl.handover import AVERAGE_FILE, stale_averages
+from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
 from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, play_live, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings
 from wrappers.simultaneous import SimultaneousGame
 
-STATE_FILE = "selfplay.json"
 KEEP = "keep"  # SelfPlayJob.cpu_hours: a resumed run keeps its own budget
 
 

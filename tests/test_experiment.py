@@ -43,7 +43,7 @@ def write(tmp_path: Path, data: dict) -> Path:
 
 def test_builtin_experiments() -> None:
     assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
-            "strength-exploiters", "strength-joingames", "strength-share", "strength-lite"} <= set(
+            "strength-exploiters", "strength-joingames", "strength-share", "strength-lite", "strength-floor"} <= set(
         builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -74,6 +74,11 @@ def test_builtin_experiments() -> None:
         training = theirs.scenario.training
         assert mine.name == theirs.name and mine.scenario.fingerprint() == theirs.scenario.fingerprint()
         assert mine.scenario.training.model_copy(update={"belief_settings": training.belief_settings}) == training
+    floor = load_experiment("strength-floor").runs()  # strength-lite's runs with half the games for the scripted
+    for mine, theirs in zip(floor, lite, strict=True):
+        settings = mine.scenario.training
+        assert (settings.selfplay.league_floor, settings.selfplay.league_floor_split) == (0.5, "pfsp")
+        assert settings.model_copy(update={"selfplay": theirs.scenario.training.selfplay}) == theirs.scenario.training
     preset = load_scenario("league")  # `pecli selfplay -c league` trains strength-small's runs, one at a time
     for run in small.runs():
         assert with_overrides(preset, {"belief": run.kind}).training == run.scenario.training

@@ -54,8 +54,13 @@ def test_builtin_experiments() -> None:
     smoke = load_experiment("smoke")
     assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200
     schedules = load_experiment("schedules")  # the curriculum's span is fixed, whatever the CPU budget stops
-    assert [r.schedule for r in schedules.runs()] == ["league", "alternating", "simultaneous"]
-    assert all(r.cpu_hours == 1 and r.scenario.training.curriculum.span(6_000_000) == 300_000 for r in schedules.runs())
+    assert {(r.schedule, r.seed) for r in schedules.runs()} == {
+        (schedule, seed) for schedule in ("league", "alternating", "simultaneous") for seed in (0, 1, 2)}
+    assert all(r.cpu_hours == 0.5 and r.scenario.training.curriculum.span(6_000_000) == 300_000 for r in schedules.runs())
+    strength = {(r.kind, r.seed, r.schedule): r for r in load_experiment("strength").runs()}
+    for run in schedules.runs():  # strength.yaml's `none` runs, stopped earlier
+        theirs = strength[(run.kind, run.seed, run.schedule)]
+        assert run.name == theirs.name and run.scenario.training == theirs.scenario.training
     small = load_experiment("strength-small")  # the league as measured best at half a CPU-hour: no exploiters
     assert [(r.kind, r.seed, r.schedule) for r in small.runs()] == [
         (kind, seed, "league") for seed in (0, 1, 2) for kind in ("none", "bimdn")]
@@ -79,6 +84,8 @@ def test_builtin_experiments() -> None:
         settings = mine.scenario.training
         assert (settings.selfplay.league_floor, settings.selfplay.league_floor_split) == (0.5, "pfsp")
         assert settings.model_copy(update={"selfplay": theirs.scenario.training.selfplay}) == theirs.scenario.training
+    for run in small.runs():  # so the league runs of strength-small and strength.yaml are the same runs
+        assert run.scenario.training == strength[(run.kind, run.seed, run.schedule)].scenario.training
     preset = load_scenario("league")  # `pecli selfplay -c league` trains strength-small's runs, one at a time
     for run in small.runs():
         assert with_overrides(preset, {"belief": run.kind}).training == run.scenario.training

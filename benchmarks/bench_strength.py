@@ -32,7 +32,8 @@ pooled over evaders and seeds, and per schedule that has both, the two-proportio
 against ``none`` pursuers (same schedule, same CPU) over the evaders that every one of them met: a run never
 meets its own evader, and the two kinds' evaders differ in strength, so each kind's cross-play alone would
 not compare like with like. That test counts every episode as an independent sample; beside it, Welch's t-test
-over the runs' own rates takes the training seed as the unit (wider spread, the stricter test). With
+over the runs' own rates takes the training seed as the unit (wider spread, the stricter test). Each two schedules
+trained with the same belief are compared the same way (both tests, over the evaders all their pursuers met). With
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
@@ -214,21 +215,42 @@ def pool(faced: Faced, runs: list[str], evaders: set[str] | None = None) -> tupl
     return sum(c for c, _ in rates), sum(n for _, n in rates)
 
 
-def seed_level(faced: Faced, bimdn: list[str], none: list[str], evaders: set[str]) -> str:
-    """Each run's capture rate over ``evaders`` and Welch's t-test of the ``bimdn`` runs' against the ``none`` ones'.
+def seed_level(faced: Faced, sides: dict[str, list[str]], evaders: set[str]) -> str:
+    """Each run's capture rate over ``evaders`` and Welch's t-test of the two ``sides`` (label -> its runs).
 
     The z-test pools episodes as if each were independent; the runs' spread from one training seed to another is
     wider than that, so this test, with a run as one sample, is the stricter one."""
     rates = {}
-    for name in (*bimdn, *none):
+    for name in (name for names in sides.values() for name in names):
         captures, episodes = pool(faced, [name], evaders)
         rates[name] = captures / episodes
-    listed = "; ".join(f"{kind} {', '.join(f'{rates[n]:.3f}' for n in names)}"
-                       for kind, names in (("bimdn", bimdn), ("none", none)))
-    if min(len(bimdn), len(none)) < 2:
-        return f"{listed} (a test needs 2 runs of each kind)"
-    p = ttest_ind([rates[n] for n in bimdn], [rates[n] for n in none], equal_var=False).pvalue
-    return f"{listed}; Welch t-test p = {p:.2g}"
+    listed = "; ".join(f"{label} {', '.join(f'{rates[n]:.3f}' for n in names)}" for label, names in sides.items())
+    if min(len(names) for names in sides.values()) < 2:
+        return f"{listed} (a test needs 2 runs of each)"
+    first, second = ([rates[n] for n in names] for names in sides.values())
+    return f"{listed}; Welch t-test p = {ttest_ind(first, second, equal_var=False).pvalue:.2g}"
+
+
+def contrast(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str], float, float, float]:
+    """The evaders that every pursuer of ``first`` and ``second`` met (not their runs' own), each side's capture
+    rate over them and the two-proportion z-test's p of one against the other."""
+    common = set.intersection(*(set(faced[name]) for name in (*first, *second)))
+    (ca, na), (cb, nb) = pool(faced, first, common), pool(faced, second, common)
+    return common, ca / na, cb / nb, two_proportion_z_test(ca, na, cb, nb)
+
+
+def print_schedules(faced: Faced, groups: dict[tuple[str, str], list[str]]) -> None:
+    """Each two schedules trained with the same belief, their pursuers over the evaders all of them met."""
+    pairs = [(belief, first, second) for (first, belief) in sorted(groups) for (second, other) in sorted(groups)
+             if other == belief and first < second]
+    if pairs:
+        print("\nschedules against each other (same belief, same budget), z-test over episodes, Welch over runs:")
+    for belief, first, second in pairs:
+        a, b = groups[(first, belief)], groups[(second, belief)]
+        common, rate_a, rate_b, p = contrast(faced, a, b)
+        print(f"- {belief}: {first} {rate_a:.3f} vs {second} {rate_b:.3f} over the {len(common)} evaders all of "
+              f"them met: z-test p = {p:.2g}")
+        print(f"  per run: {seed_level(faced, {first: a, second: b}, common)}")
 
 
 def print_cross_play(faced: Faced, runs: list[str]) -> None:
@@ -332,19 +354,18 @@ def report(args: argparse.Namespace) -> None:
         c, n = (sum(t[i] for t, _ in kinds.values()) for i in (0, 1))
         each = ", ".join(f"{b} {cb / nb:.3f} ({k} run{'s' * (k > 1)})" for b, ((cb, nb), k) in kinds.items())
         print(f"- {schedule}: {c / n:.3f} over {n} episodes; {each}")
+    print_schedules(faced, groups)
     for schedule in sorted({s for s, b in groups if b == "bimdn" and (s, "none") in groups}):
         bimdn, none = groups[(schedule, "bimdn")], groups[(schedule, "none")]
-        common = set.intersection(*(set(faced[name]) for name in (*bimdn, *none)))  # not each other's own evaders
-        (cb, nb), (cn, nn) = pool(faced, bimdn, common), pool(faced, none, common)
-        p = two_proportion_z_test(cb, nb, cn, nn)
-        better = cb / nb > cn / nn and p < 0.05
+        common, rate_b, rate_n, p = contrast(faced, bimdn, none)
+        better = rate_b > rate_n and p < 0.05
         hours = {kind: sum(cpu_hours_to(runs[name]["at"]) for name in names) / len(names)
                  for kind, names in (("bimdn", bimdn), ("none", none))}
-        print(f"\n{schedule}: bimdn pursuers {cb / nb:.3f} vs none {cn / nn:.3f} over the {len(common)} evaders every "
+        print(f"\n{schedule}: bimdn pursuers {rate_b:.3f} vs none {rate_n:.3f} over the {len(common)} evaders every "
               f"one of them met ({', '.join(sorted(common))}) and every seed, at {hours['bimdn']:.2f} and "
               f"{hours['none']:.2f} CPU-h on average: z-test p = {p:.2g} "
               f"({'met' if better else 'NOT met'}: bimdn must capture more, p < 0.05)")
-        print(f"  per run (the training seed as the unit): {seed_level(faced, bimdn, none, common)}")
+        print(f"  per run (the training seed as the unit): {seed_level(faced, {'bimdn': bimdn, 'none': none}, common)}")
         if not better:
             missed.append(f"{schedule}: bimdn pursuers capture more than none (z-test p = {p:.2g})")
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -10,6 +11,13 @@ from pathlib import Path
 from pecli.rl.pool import OpponentPool
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_strength.py"
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("bench_strength", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def fork(*args: str) -> subprocess.CompletedProcess[str]:
@@ -66,3 +74,22 @@ def test_fork_refuses_with_one_line_and_leaves_nothing(tmp_path: Path) -> None:
     assert again.returncode != 0 and "exists" in again.stderr
     missing = fork("--run", str(tmp_path / "zoo"), "--to", str(arm))
     assert missing.returncode != 0 and "not a self-play run" in missing.stderr
+
+
+def test_schedules_are_compared_over_the_evaders_all_their_pursuers_met(capsys) -> None:
+    bench = load_script()
+    runs = ["none-league-s0", "none-league-s1", "none-alternating-s0", "none-alternating-s1", "none-simultaneous-s0"]
+    rate = {"none-league-s0": 90, "none-league-s1": 88, "none-alternating-s0": 60, "none-alternating-s1": 62,
+            "none-simultaneous-s0": 70}  # against the other runs' evaders; greedy 90 for all
+    faced = {name: {"greedy": (90, 100), **{o: (rate[name], 100) for o in runs if o != name}} for name in runs}
+    common, league, alternating, p = bench.contrast(faced, runs[:2], runs[2:4])
+    assert common == {"greedy", "none-simultaneous-s0"}  # not the evaders of the runs compared, which one met
+    assert (league, alternating) == (0.895, 0.755) and p < 1e-6
+    groups = {(schedule, "none"): [n for n in runs if n.split("-")[1] == schedule]
+              for schedule in ("league", "alternating", "simultaneous")}
+    bench.print_schedules(faced, groups)
+    out = capsys.readouterr().out
+    assert "none: alternating 0.755 vs league 0.895 over the 2 evaders all of them met" in out
+    assert "per run: alternating 0.750, 0.760; league 0.900, 0.890; Welch t-test p = " in out
+    assert "none: league 0.893 vs simultaneous 0.767 over the 3 evaders" in out  # greedy, the alternating ones
+    assert "simultaneous 0.767 (a test needs 2 runs of each)" in out

@@ -235,21 +235,24 @@ def contrast(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str
     """The evaders that every pursuer of ``first`` and ``second`` met (not their runs' own), each side's capture
     rate over them and the two-proportion z-test's p of one against the other."""
     common = set.intersection(*(set(faced[name]) for name in (*first, *second)))
+    if not common:
+        raise ValueError("no evader was met by every pursuer of both sides")
     (ca, na), (cb, nb) = pool(faced, first, common), pool(faced, second, common)
     return common, ca / na, cb / nb, two_proportion_z_test(ca, na, cb, nb)
 
 
-def print_schedules(faced: Faced, groups: dict[tuple[str, str], list[str]]) -> None:
+def print_schedules(faced: Faced, groups: dict[tuple[str, str], list[str]], budget: str) -> None:
     """Each two schedules trained with the same belief, their pursuers over the evaders all of them met."""
-    pairs = [(belief, first, second) for (first, belief) in sorted(groups) for (second, other) in sorted(groups)
+    keys = sorted(groups, key=lambda key: (key[1], key[0]))  # by belief, then schedule
+    pairs = [(belief, first, second) for (first, belief) in keys for (second, other) in keys
              if other == belief and first < second]
     if pairs:
-        print("\nschedules against each other (same belief, same budget), z-test over episodes, Welch over runs:")
+        print(f"\nschedules against each other (same belief), {budget}: z-test over episodes, Welch over runs")
     for belief, first, second in pairs:
         a, b = groups[(first, belief)], groups[(second, belief)]
         common, rate_a, rate_b, p = contrast(faced, a, b)
         print(f"- {belief}: {first} {rate_a:.3f} vs {second} {rate_b:.3f} over the {len(common)} evaders all of "
-              f"them met: z-test p = {p:.2g}")
+              f"them met ({', '.join(sorted(common))}): z-test p = {p:.2g}")
         print(f"  per run: {seed_level(faced, {first: a, second: b}, common)}")
 
 
@@ -354,7 +357,7 @@ def report(args: argparse.Namespace) -> None:
         c, n = (sum(t[i] for t, _ in kinds.values()) for i in (0, 1))
         each = ", ".join(f"{b} {cb / nb:.3f} ({k} run{'s' * (k > 1)})" for b, ((cb, nb), k) in kinds.items())
         print(f"- {schedule}: {c / n:.3f} over {n} episodes; {each}")
-    print_schedules(faced, groups)
+    print_schedules(faced, groups, budget)
     for schedule in sorted({s for s, b in groups if b == "bimdn" and (s, "none") in groups}):
         bimdn, none = groups[(schedule, "bimdn")], groups[(schedule, "none")]
         common, rate_b, rate_n, p = contrast(faced, bimdn, none)

@@ -7,13 +7,16 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
+
+import pytest
 
 from pecli.rl.pool import OpponentPool
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_strength.py"
 
 
-def load_script():
+def load_script() -> ModuleType:
     spec = importlib.util.spec_from_file_location("bench_strength", SCRIPT)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -76,20 +79,30 @@ def test_fork_refuses_with_one_line_and_leaves_nothing(tmp_path: Path) -> None:
     assert missing.returncode != 0 and "not a self-play run" in missing.stderr
 
 
-def test_schedules_are_compared_over_the_evaders_all_their_pursuers_met(capsys) -> None:
+def test_schedules_are_compared_over_the_evaders_all_their_pursuers_met(capsys: pytest.CaptureFixture[str]) -> None:
     bench = load_script()
-    runs = ["none-league-s0", "none-league-s1", "none-alternating-s0", "none-alternating-s1", "none-simultaneous-s0"]
+    runs = ["none-league-s0", "none-league-s1", "none-alternating-s0", "none-alternating-s1", "none-simultaneous-s0",
+            "bimdn-league-s0", "bimdn-alternating-s0"]
     rate = {"none-league-s0": 90, "none-league-s1": 88, "none-alternating-s0": 60, "none-alternating-s1": 62,
-            "none-simultaneous-s0": 70}  # against the other runs' evaders; greedy 90 for all
+            "none-simultaneous-s0": 70, "bimdn-league-s0": 95, "bimdn-alternating-s0": 50}  # vs other runs' evaders
     faced = {name: {"greedy": (90, 100), **{o: (rate[name], 100) for o in runs if o != name}} for name in runs}
     common, league, alternating, p = bench.contrast(faced, runs[:2], runs[2:4])
-    assert common == {"greedy", "none-simultaneous-s0"}  # not the evaders of the runs compared, which one met
-    assert (league, alternating) == (0.895, 0.755) and p < 1e-6
-    groups = {(schedule, "none"): [n for n in runs if n.split("-")[1] == schedule]
-              for schedule in ("league", "alternating", "simultaneous")}
-    bench.print_schedules(faced, groups)
-    out = capsys.readouterr().out
-    assert "none: alternating 0.755 vs league 0.895 over the 2 evaders all of them met" in out
-    assert "per run: alternating 0.750, 0.760; league 0.900, 0.890; Welch t-test p = " in out
-    assert "none: league 0.893 vs simultaneous 0.767 over the 3 evaders" in out  # greedy, the alternating ones
-    assert "simultaneous 0.767 (a test needs 2 runs of each)" in out
+    assert common == {"greedy", *runs[4:]}  # not the evaders of the runs compared, which one of them met
+    assert (league, alternating) == (714 / 800, 546 / 800) and p < 1e-6
+    groups: dict[tuple[str, str], list[str]] = {}
+    for name in runs:
+        belief, schedule, _ = name.split("-")
+        groups.setdefault((schedule, belief), []).append(name)
+    bench.print_schedules(faced, groups, "at 0.5 CPU-h")
+    lines = capsys.readouterr().out.splitlines()
+    pairs = [line for line in lines if line.startswith("- ")]
+    assert [line.split(" over ")[0] for line in pairs] == [  # each pair once, within one belief
+        "- bimdn: alternating 0.567 vs league 0.942", "- none: alternating 0.682 vs league 0.892",
+        "- none: alternating 0.668 vs simultaneous 0.740", "- none: league 0.892 vs simultaneous 0.740"]
+    assert ("over the 4 evaders all of them met (bimdn-alternating-s0, bimdn-league-s0, greedy, none-simultaneous-s0): "
+            f"z-test p = {p:.2g}") in pairs[1]
+    per_run = lines[lines.index(pairs[1]) + 1]
+    assert per_run.startswith("  per run: alternating 0.675, 0.690; league 0.900, 0.885; Welch")
+    assert lines[lines.index(pairs[3]) + 1].endswith("simultaneous 0.740 (a test needs 2 runs of each)")
+    with pytest.raises(ValueError, match="no evader"):
+        bench.contrast({"a": {"x": (1, 2)}, "b": {"y": (1, 2)}}, ["a"], ["b"])

@@ -139,16 +139,20 @@ def train(args: argparse.Namespace) -> None:
         if changed:
             sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, or another --zoo")
     for run in runs:
-        print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} of {run.cpu_hours} CPU-h", flush=True)
+        limit = f"of {run.cpu_hours:g} CPU-h" if run.cpu_hours is not None else \
+            f"CPU-h, to {run.scenario.training.selfplay.rounds} rounds"
+        print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} {limit}", flush=True)
         try:
             with sigterm_stops():  # `kill` (or a job's time limit) commits and stops like Ctrl-C
-                outcome = execute_run(run, args.zoo, progress=True)
+                outcome = execute_run(run, args.zoo, progress=sys.stderr.isatty(),  # a log gets a line a round
+                                      report=lambda line, name=run.name: print(f"{name}: {line}", flush=True))
         except SelfPlayInterrupted as stop:
             sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
         except KeyboardInterrupt:  # before its first round started: nothing of it to keep yet
             sys.exit(f"{run.name}: stopped; run the same command to continue")
-        print(f"{run.name}: {outcome['did']}, round {outcome['progress']['round']}, "
-              f"{run_cpu_hours(args.zoo / run.name):.2f} CPU-h", flush=True)
+        did = "trained before" if outcome["did"] == "finished" else f"{outcome['did']} by this command"
+        print(f"{run.name}: to round {outcome['progress']['round']}, {run_cpu_hours(args.zoo / run.name):.2f} CPU-h "
+              f"({did})", flush=True)
 
 
 def final_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None,

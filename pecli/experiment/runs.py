@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -105,11 +105,13 @@ def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, i
     return seconds, unknown
 
 
-def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, Any]:
+def execute_run(run: RunSpec, zoo: Path, progress: bool = False,
+                report: Callable[[str], None] = lambda line: None) -> dict[str, Any]:
     """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
     or, for a finished run, train nothing (a self-play run's averages are written if a stop left them behind).
     Returns what it did (``started``, ``resumed`` or ``finished``), with the CPU seconds of this call and the
-    run's progress. ``progress`` shows the trainers' own progress."""
+    run's progress. ``progress`` shows the trainers' own live progress; ``report`` gets self-play's line after
+    each round (as ``pecli selfplay`` prints it)."""
     import torch
 
     from pecli.rl.selfplay import SelfPlay, SelfPlayJob, read_state, write_averages
@@ -133,7 +135,7 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False) -> dict[str, An
             # stopped between creating the run folder and writing its first state: nothing was trained
             shutil.rmtree(folder)
         SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
-                             progress=progress, cpu_hours=run.cpu_hours)).run()
+                             progress=progress, cpu_hours=run.cpu_hours), report=report).run()
     else:
         resume = (folder / "config.yaml").is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]

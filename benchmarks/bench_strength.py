@@ -139,8 +139,7 @@ def train(args: argparse.Namespace) -> None:
         if changed:
             sys.exit(f"{run.name} was started with other settings ({changed[0]}): give them again, or another --zoo")
     for run in runs:
-        limit = f"of {run.cpu_hours:g} CPU-h" if run.cpu_hours is not None else \
-            f"CPU-h, to {run.scenario.training.selfplay.rounds} rounds"
+        limit = f"of {run.cpu_hours:g} CPU-h" if run.cpu_hours is not None else "CPU-h (no CPU budget)"
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} {limit}", flush=True)
         try:
             with sigterm_stops():  # `kill` (or a job's time limit) commits and stops like Ctrl-C

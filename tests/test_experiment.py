@@ -59,7 +59,7 @@ def test_builtin_experiments() -> None:
     assert all(r.cpu_hours == 0.5 and r.scenario.training.curriculum.span(6_000_000) == 300_000
                for r in schedules.runs())
     strength = {(r.kind, r.seed, r.schedule): r for r in load_experiment("strength").runs()}
-    for run in schedules.runs():  # strength.yaml's `none` runs, stopped earlier
+    for run in schedules.runs():  # strength.yaml's `none` runs (it extends strength), stopped earlier
         theirs = strength[(run.kind, run.seed, run.schedule)]
         assert run.name == theirs.name and run.scenario.training == theirs.scenario.training
     small = load_experiment("strength-small")  # the league as measured best at half a CPU-hour: no exploiters

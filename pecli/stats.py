@@ -1,4 +1,5 @@
-"""Statistics for comparing policies: the paper's two-proportion z-test and Bradley–Terry ratings."""
+"""Statistics for comparing policies: the paper's two-proportion z-test, its stratified form (Mantel–Haenszel) and
+Bradley–Terry ratings."""
 
 from __future__ import annotations
 
@@ -24,6 +25,26 @@ def two_proportion_z_test(successes_a: int, n_a: int, successes_b: int, n_b: int
         return 1.0
     z = (successes_a / n_a - successes_b / n_b) / math.sqrt(variance)
     return math.erfc(abs(z) / math.sqrt(2.0))
+
+
+def mantel_haenszel_test(strata: Sequence[tuple[int, int, int, int]]) -> tuple[float, float]:
+    """Whether side a captures more than side b within strata (Cochran–Mantel–Haenszel, no continuity correction).
+
+    Each stratum is ``(successes_a, n_a, successes_b, n_b)`` against one opponent, so sides that met their
+    opponents in different proportions compare like with like. Returns a's successes above what equal rates within
+    each stratum would give, and the two-sided p-value; strata of one side only or of one outcome add nothing (a
+    p-value of 1 when none is left). With one stratum it is the pooled z-test scaled by (n - 1) / n in chi-square.
+    """
+    excess = variance = 0.0
+    for successes_a, n_a, successes_b, n_b in strata:
+        n, successes = n_a + n_b, successes_a + successes_b
+        if n_a < 1 or n_b < 1 or successes in (0, n):
+            continue
+        excess += successes_a - n_a * successes / n
+        variance += n_a * n_b * successes * (n - successes) / (n * n * (n - 1))
+    if variance <= 0.0:
+        return excess, 1.0
+    return excess, math.erfc(abs(excess) / math.sqrt(variance) / math.sqrt(2.0))
 
 
 def ties_with_best(successes: Sequence[int], trials: Sequence[int], higher_is_better: bool = True,

@@ -106,3 +106,25 @@ def test_schedules_are_compared_over_the_evaders_all_their_pursuers_met(capsys: 
     assert lines[lines.index(pairs[3]) + 1].endswith("simultaneous 0.740 (a test needs 2 runs of each)")
     with pytest.raises(ValueError, match="no evader"):
         bench.contrast({"a": {"x": (1, 2)}, "b": {"y": (1, 2)}}, ["a"], ["b"])
+
+
+def test_beliefs_are_compared_over_every_evader_stratified_by_evader() -> None:
+    bench = load_script()
+    runs = ["bimdn-league-s0", "bimdn-league-s1", "none-league-s0", "none-league-s1"]
+    hard = {"bimdn-league-s0", "bimdn-league-s1"}  # the bimdn runs' evaders escape more, whoever chases them
+
+    def faced(bonus: int) -> dict[str, dict[str, tuple[int, int]]]:
+        gain = {name: bonus if name.startswith("bimdn") else 0 for name in runs}
+        return {name: {"greedy": (95 + gain[name], 100),
+                       **{o: ((60 if o in hard else 90) + gain[name], 100) for o in runs if o != name}}
+                for name in runs}
+
+    # equal against each evader; pooled, bimdn looks better only because it meets its own kind's evaders less
+    every, rate_b, rate_n, p, excess, p_stratified = bench.over_every_evader(faced(0), runs[:2], runs[2:])
+    assert every == {"greedy", *runs}
+    assert (rate_b, rate_n) == (335 / 400, 305 / 400) and p < 0.05
+    assert excess == pytest.approx(0.0, abs=1e-9) and p_stratified == pytest.approx(1.0)
+    every, rate_b, rate_n, p, excess, p_stratified = bench.over_every_evader(faced(4), runs[:2], runs[2:])
+    assert excess > 0 and p_stratified < 0.05
+    with pytest.raises(ValueError, match="no evader"):
+        bench.over_every_evader({"a": {"x": (1, 2)}, "b": {"y": (1, 2)}}, ["a"], ["b"])

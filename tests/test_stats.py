@@ -1,4 +1,4 @@
-"""The z-test, ties with the best, and Bradley–Terry ratings against hand-computed values."""
+"""The z-test, its stratified form, ties with the best, and Bradley–Terry ratings against hand-computed values."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from pecli.stats import ELO_SCALE, bradley_terry, ties_with_best, two_proportion_z_test
+from pecli.stats import ELO_SCALE, bradley_terry, mantel_haenszel_test, ties_with_best, two_proportion_z_test
 
 
 def test_z_test_by_hand() -> None:
@@ -24,6 +24,27 @@ def test_z_test_edges() -> None:
     assert two_proportion_z_test(48, 100, 52, 100) == pytest.approx(0.5716, abs=1e-3)  # z = 0.566
     with pytest.raises(ValueError):
         two_proportion_z_test(0, 0, 1, 1)
+
+
+def test_mantel_haenszel_with_one_stratum_is_the_z_test() -> None:
+    # chi-square of Mantel-Haenszel = (n - 1) / n of Pearson's, whose root is the pooled z: 1470/1500 vs 1410/1500
+    z = (0.98 - 0.94) / math.sqrt(0.96 * 0.04 * (2 / 1500))
+    excess, p = mantel_haenszel_test([(1470, 1500, 1410, 1500)])
+    assert excess == pytest.approx(1470 - 1500 * 2880 / 3000)  # 30 captures above equal rates
+    assert p == pytest.approx(math.erfc(z * math.sqrt(2999 / 3000) / math.sqrt(2)), rel=1e-9)
+
+
+def test_mantel_haenszel_compares_within_strata() -> None:
+    # Simpson: a met the hard opponent twice as often, so pooled it looks worse; within each opponent both are equal
+    strata = [(95, 100, 190, 200), (80, 200, 40, 100)]
+    assert two_proportion_z_test(175, 300, 230, 300) < 1e-5
+    excess, p = mantel_haenszel_test(strata)
+    assert excess == pytest.approx(0.0, abs=1e-9) and p == pytest.approx(1.0)
+    better = [(99, 100, 180, 200), (100, 200, 40, 100)]  # a ahead against both: 0.99 vs 0.90, 0.50 vs 0.40
+    excess, p = mantel_haenszel_test(better)
+    assert excess > 0 and p < 0.01
+    excess, p = mantel_haenszel_test([(10, 10, 20, 20), (5, 5, 0, 0)])  # one outcome only, one side only
+    assert (excess, p) == (0.0, 1.0)
 
 
 def test_ties_with_best() -> None:

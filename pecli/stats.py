@@ -37,6 +37,9 @@ def mantel_haenszel_test(strata: Sequence[tuple[int, int, int, int]]) -> tuple[f
     """
     excess = variance = 0.0
     for successes_a, n_a, successes_b, n_b in strata:
+        if not (0 <= successes_a <= n_a and 0 <= successes_b <= n_b):
+            raise ValueError(f"a stratum needs 0 <= successes <= episodes on both sides, not {successes_a}/{n_a} "
+                             f"and {successes_b}/{n_b}")
         n, successes = n_a + n_b, successes_a + successes_b
         if n_a < 1 or n_b < 1 or successes in (0, n):
             continue

@@ -45,6 +45,8 @@ def test_mantel_haenszel_compares_within_strata() -> None:
     assert excess > 0 and p < 0.01
     excess, p = mantel_haenszel_test([(10, 10, 20, 20), (5, 5, 0, 0)])  # one outcome only, one side only
     assert (excess, p) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="0 <= successes <= episodes"):
+        mantel_haenszel_test([(11, 10, 5, 10)])
 
 
 def test_ties_with_best() -> None:

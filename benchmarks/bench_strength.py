@@ -29,14 +29,14 @@ CPU budget, then the same report::
 (circler, blindside, wall-runner, hider, corner-sitter) and against every other run's final evader (cross-play); every
 final evader against pure pursuit. It prints the issue's targets met or missed, each schedule's pursuers
 pooled over evaders and seeds, and per schedule that has both, ``bimdn`` against ``none`` pursuers (same
-schedule, same CPU) over every evader a pursuer of each kind met, cross-play included, as the paper's Table I
-pools them: the two-proportion z-test, and beside it the same test stratified by evader (Mantel–Haenszel),
-because a run never meets its own evader, so each kind meets its own kind's evaders less often; the target is
-met when both say ``bimdn`` captures more. Then the same over the scripted evaders alone (those every pursuer
-met), which both kinds catch near 0.99 once trained. The z-tests count every episode as an independent sample;
-beside them, Welch's t-test over the runs' own rates takes the training seed as the unit (wider spread, the
-stricter test). Each two schedules
-trained with the same belief are compared by the z-test and Welch's, over the evaders all their pursuers met. With
+schedule, same CPU) over every evader a pursuer of each kind met, cross-play included (learned evaders count, as
+in the paper's Table I): the two-proportion z-test, and beside it the same test stratified by evader
+(Mantel–Haenszel), because a run never meets its own evader, so each kind meets its own kind's evaders less
+often; the target is met when both say ``bimdn`` captures more. Then the same over the scripted evaders alone
+(those every pursuer met), which both kinds catch near 0.99 once trained. The z-tests count every episode as an
+independent sample; beside them, Welch's t-test over the runs' own rates takes the training seed as the unit
+(wider spread, the stricter test). Each two schedules trained with the same belief are compared by the z-test
+and Welch's, over the evaders all their pursuers met. With
 ``--cpu-hours H`` it takes each run's checkpoints of the round at which a run of budget ``H`` would have
 stopped (``--round N``: of round N, equal transitions per main learner instead of equal CPU), and leaves
 out runs not there yet: every schedule compared at any equal budget, while the runs are still training.
@@ -250,7 +250,7 @@ def contrast(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str
 def over_every_evader(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str], float, float, float, float,
                                                                                   float]:
     """The pursuers of ``first`` against those of ``second`` over every evader a pursuer of each side met, cross-play
-    included (the paper's reading): those evaders, each side's pooled rate, the z-test's p, and ``first``'s
+    included (learned evaders count, as in the paper's Table I): those evaders, each side's pooled rate, the z-test's p, and ``first``'s
     captures above equal rates per evader with the Mantel–Haenszel test's p. The sides meet the learned evaders
     in different proportions (a run never meets its own), so the stratified test is the one to trust."""
     common = set().union(*(faced[n] for n in first)) & set().union(*(faced[n] for n in second))

@@ -243,23 +243,28 @@ def contrast(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str
     common = set.intersection(*(set(faced[name]) for name in (*first, *second)))
     if not common:
         raise ValueError("no evader was met by every pursuer of both sides")
-    (ca, na), (cb, nb) = pool(faced, first, common), pool(faced, second, common)
-    return common, ca / na, cb / nb, two_proportion_z_test(ca, na, cb, nb)
+    return common, *pooled_z_test(faced, first, second, common)
 
 
-def over_every_evader(faced: Faced, first: list[str], second: list[str]) -> tuple[set[str], float, float, float, float,
-                                                                                  float]:
+def pooled_z_test(faced: Faced, first: list[str], second: list[str], evaders: set[str]) -> tuple[float, float, float]:
+    """The capture rates of the pursuers of ``first`` and ``second`` pooled over ``evaders``, and the z-test's p."""
+    (ca, na), (cb, nb) = pool(faced, first, evaders), pool(faced, second, evaders)
+    return ca / na, cb / nb, two_proportion_z_test(ca, na, cb, nb)
+
+
+def over_every_evader(faced: Faced, first: list[str],
+                      second: list[str]) -> tuple[set[str], float, float, float, float, float]:
     """The pursuers of ``first`` against those of ``second`` over every evader a pursuer of each side met, cross-play
-    included (learned evaders count, as in the paper's Table I): those evaders, each side's pooled rate, the z-test's p, and ``first``'s
-    captures above equal rates per evader with the Mantel–Haenszel test's p. The sides meet the learned evaders
-    in different proportions (a run never meets its own), so the stratified test is the one to trust."""
+    included (learned evaders count, as in the paper's Table I): those evaders, each side's pooled rate, the
+    z-test's p, and ``first``'s captures above equal rates per evader with the Mantel–Haenszel test's p. The sides
+    meet the learned evaders in different proportions (a run never meets its own), so the stratified test is the
+    one to trust."""
     common = set().union(*(faced[n] for n in first)) & set().union(*(faced[n] for n in second))
     if not common:
         raise ValueError("no evader was met by a pursuer of each side")
-    (ca, na), (cb, nb) = pool(faced, first, common), pool(faced, second, common)
     excess, p_stratified = mantel_haenszel_test([(*pool(faced, first, {e}), *pool(faced, second, {e}))
                                                  for e in sorted(common)])
-    return common, ca / na, cb / nb, two_proportion_z_test(ca, na, cb, nb), excess, p_stratified
+    return common, *pooled_z_test(faced, first, second, common), excess, p_stratified
 
 
 def print_schedules(faced: Faced, groups: dict[tuple[str, str], list[str]], budget: str) -> None:
@@ -277,7 +282,8 @@ def print_schedules(faced: Faced, groups: dict[tuple[str, str], list[str]], budg
         print(f"  per run: {seed_level(faced, {first: a, second: b}, common)}")
 
 
-def print_beliefs(faced: Faced, schedule: str, bimdn: list[str], none: list[str], hours: dict[str, float]) -> str | None:
+def print_beliefs(faced: Faced, schedule: str, bimdn: list[str], none: list[str],
+                  hours: dict[str, float]) -> str | None:
     """The target ``bimdn`` > ``none`` for one schedule's pursuers (``hours``: each kind's mean CPU-hours), judged
     over every evader, then the scripted evaders' reading; the missed target's line, or None when met."""
     every, every_b, every_n, p_every, excess, p_stratified = over_every_evader(faced, bimdn, none)

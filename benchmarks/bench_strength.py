@@ -1,10 +1,10 @@
-"""How strong are self-play's players? Schedules and beliefs compared at equal CPU time (issue 18).
+"""How strong are self-play's players? Schedules and beliefs compared at equal CPU time, and their exploitability.
 
     python benchmarks/bench_strength.py train [--experiment strength|strength-small|schedules|FILE] \\
         [--schedules league alternating simultaneous] [--beliefs none bimdn] [--seeds 0 1 2] [--cpu-hours 4] \\
         [--config tuned] [--rounds 150] [--steps-per-round 40000] [--zoo runs/bench_strength]
     python benchmarks/bench_strength.py report [--zoo runs/bench_strength] [--episodes 500] [--cpu-hours H | --round N] [--average K [--average-evaders]]
-    python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--role pursuer] [--steps 200000] [--cpu-hours H | --round N]
+    python benchmarks/bench_strength.py exploit [--zoo runs/bench_strength] [--cpu-minutes 20] [--seeds 3] [--warm] [--handed-over | --cpu-hours H | --round N]
     python benchmarks/bench_strength.py compare --arms control=ZOO_A exploiters=ZOO_B [--episodes 500] [--cpu-hours H | --round N]
     python benchmarks/bench_strength.py behaviour --pursuer P.zip --evaders E.zip hider ... [--episodes 200] [--render F.png]
     python benchmarks/bench_strength.py fork --run ZOO/RUN --to ZOO [--add corner-sitter ...]
@@ -44,10 +44,11 @@ out runs not there yet: every schedule compared at any equal budget, while the r
 (``pecli zoo average``; the evaders stay the round's own, unless ``--average-evaders``: then both sides are
 averaged, as self-play's ``average.zip`` once those rounds are all after the curriculum).
 
-``exploit`` measures how exploitable each run's final pursuer (``--role evader``: evader) is, which no target of
-the issue asks but cross-play hints at: a fresh ``none`` learner of the other side trains against it alone (TD3,
-no curriculum, ``--steps`` transitions, in ``<zoo>/exploit``, resumable) and plays it 500 games; results are cached
-in ``<zoo>/exploit/results.json``. A robust pursuer keeps its capture rate against its own best response.
+``exploit`` measures how exploitable each run's pursuer-evader pair is (``pecli exploit --pair`` per run, in
+``<zoo>/exploit/<run>``, resumable): best responses of ``--cpu-minutes`` over ``--seeds``, fresh and with
+``--warm`` also warm-started from the run's own player of their role, on the real game; it prints the strongest
+best evader's capture rate, the strongest best pursuer's and NashConv with its interval, against the targets
+(a best evader held to >= 0.75, NashConv <= 0.25). ``--handed-over`` takes each run's ``average.zip`` players.
 
 ``compare`` is an A/B of two or more zoos of the same runs (same names: same kind, schedule and seed), e.g. a control
 and a copy trained on with other settings from the same checkpoint: every arm's pursuers play the scripted evaders
@@ -96,15 +97,15 @@ from pecli.policies.registry import BUILTINS  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.rl.averaging import average_checkpoints  # noqa: E402
 from pecli.rl.pool import OpponentPool  # noqa: E402
+from pecli.rl.handover import AVERAGE_FILE  # noqa: E402
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted, round_of  # noqa: E402
-from pecli.roles import opponent_of  # noqa: E402
 from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402
 from pecli.stats import mantel_haenszel_test, two_proportion_z_test  # noqa: E402
 from pecli.tournament import Player, find_players, run_tournament  # noqa: E402
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")
-RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league)-s\d+")  # <belief>-<schedule>-s<seed>
+RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league|nash)-s\d+")  # <belief>-<schedule>-s<seed>
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
 
 
@@ -543,54 +544,40 @@ def draw_escapes(recording: Recording, path: Path) -> Path:
 
 
 def exploit(args: argparse.Namespace) -> None:
-    """How exploitable each run's final player of ``--role`` is: a fresh ``none`` learner of the other side trained
-    against it alone for ``--steps`` transitions (an approximate best response), then ``--episodes`` games."""
-    from pecli.rl.train import TrainingInterrupted, TrainJob, train as run_training, with_overrides
+    """Each run's pursuer-evader pair against best responses trained on each alone (:func:`pecli.exploit.exploit_pair`,
+    as ``pecli exploit --pair``): the issue's exploitability targets per run."""
+    from pecli.exploit import exploit_pair
 
-    runs = final_players(args.zoo, args.cpu_hours, args.round)
-    unknown = sorted(set(args.runs or []) - set(runs))
-    if unknown:
-        sys.exit(f"no run {', '.join(unknown)} at that budget under {args.zoo} (there: {', '.join(runs)})")
+    if args.handed_over:
+        runs = {run.name: {role: run / role / AVERAGE_FILE for role in ("pursuer", "evader")}
+                for run in sorted(p.parent for p in args.zoo.glob(f"*/{STATE_FILE}"))
+                if all((run / role / AVERAGE_FILE).is_file() for role in ("pursuer", "evader"))}
+    else:
+        runs = final_players(args.zoo, args.cpu_hours, args.round)
     runs = {name: players for name, players in runs.items() if not args.runs or name in args.runs}
-    try:
-        scenario = load_scenario(args.config)
-        training = with_overrides(scenario, {"steps": args.steps, "belief": "none", "curriculum.enabled": False})
-    except PecliError as error:
-        sys.exit(str(error))
-    learner = opponent_of(args.role)
-    folder = args.zoo / "exploit"
-    cache = folder / "results.json"
-    try:
-        results = json.loads(cache.read_text()) if cache.is_file() else {}
-    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
-        sys.exit(f"{cache}: damaged ({exc}); delete it to measure again")
-    print(f"each run's {args.role} against {'an' if learner == 'evader' else 'a'} {learner} trained on it alone ({args.steps:,} transitions, TD3, no "
-          f"belief, no curriculum), {args.episodes} games\n")
-    print(f"| run | {args.role} | capture rate | the {learner}'s training CPU-min |\n| --- | --- | ---: | ---: |")
+    if not runs:
+        sys.exit(f"no run to measure under {args.zoo}")
+    print(f"best responses of {args.cpu_minutes:g} CPU-minutes, {args.seeds} seeds{', fresh and warm-started' if args.warm else ''}"
+          f", {args.episodes} held-out games; the strongest counts\n")
+    print("| run | pair | best evader holds the pursuer to | best pursuer catches the evader | NashConv [95 %] | "
+          "targets (>= 0.75, <= 0.25) |\n| --- | ---: | ---: | ---: | ---: | --- |")
     for name, players in runs.items():
-        target = players[args.role]
-        job_name = f"{name}-{target.stem}-{learner}-{args.steps}-s{args.seed}"
-        if job_name not in results:
-            final = folder / job_name / learner / "final.zip"
-            if not final.is_file():
-                job = TrainJob(role=learner, scenario=training, opponent=str(target), zoo=folder, name=job_name,
-                               seed=args.seed, resume=(folder / job_name).is_dir(), progress=False)
-                try:
-                    with sigterm_stops():
-                        run_training(job)
-                except TrainingInterrupted:
-                    sys.exit(f"{job_name}: stopped; its state is kept: run the same command to continue")
-            meta = json.loads(final.with_suffix(".json").read_text())
-            players_of = {args.role: str(target), learner: str(final)}
-            pursuer = resolve_policy(players_of["pursuer"], "pursuer", scenario, seed=1)
-            evader = resolve_policy(players_of["evader"], "evader", scenario, seed=2)
-            match, _ = play_match(scenario, pursuer, evader, args.episodes, seed=0)
-            results[job_name] = {"captures": int(match.captured.sum()), "episodes": args.episodes,
-                                 "cpu_seconds": meta["cpu_seconds"]}
-            atomic_write_json(cache, results)
-        done = results[job_name]
-        print(f"| {name} | {target.stem} | {done['captures'] / done['episodes']:.2f} | "
-              f"{done['cpu_seconds'] / 60:.1f} |", flush=True)
+        try:
+            with sigterm_stops():
+                result = exploit_pair(str(players["pursuer"]), str(players["evader"]), load_scenario(args.config),
+                                      args.zoo / "exploit" / name, warm=args.warm, cpu_minutes=args.cpu_minutes,
+                                      seeds=tuple(range(args.seeds)), episodes=args.episodes)
+        except PecliError as error:
+            sys.exit(str(error))
+        except KeyboardInterrupt:
+            sys.exit(f"{name}: stopped; every response keeps its state: run the same command to continue")
+        held = [r.capture_rate for r in result.against_pursuer.responses]
+        caught = [r.capture_rate for r in result.against_evader.responses]
+        low, high = result.interval
+        met = [result.against_pursuer.strongest().capture_rate >= 0.75, result.nash_conv <= 0.25]
+        print(f"| {name} | {result.capture_rate:.2f} | {min(held):.2f} ({min(held):.2f}-{max(held):.2f}) | "
+              f"{max(caught):.2f} ({min(caught):.2f}-{max(caught):.2f}) | {result.nash_conv:.2f} [{low:.2f}, {high:.2f}] | "
+              f"{' / '.join('met' if m else 'missed' for m in met)} |", flush=True)
 
 
 def fork(args: argparse.Namespace) -> None:
@@ -630,10 +617,11 @@ def main() -> None:
         command.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
     probe = sub.add_parser("exploit")
     probe.add_argument("--zoo", type=Path, default=Path("runs/bench_strength"))
-    probe.add_argument("--role", choices=["pursuer", "evader"], default="pursuer", help="whose exploitability")
-    probe.add_argument("--steps", type=int, default=200_000, help="transitions the exploiting learner trains")
+    probe.add_argument("--cpu-minutes", type=float, default=20.0, help="CPU-minutes of each best response")
+    probe.add_argument("--seeds", type=int, default=3, help="best responses per side and start (seeds 0 .. K-1)")
+    probe.add_argument("--warm", action="store_true", help="also warm-start each response from the run's own player")
     probe.add_argument("--episodes", type=int, default=500)
-    probe.add_argument("--seed", type=int, default=0, help="the exploiting learner's seed")
+    probe.add_argument("--handed-over", action="store_true", help="each run's average.zip players (what it hands over)")
     probe.add_argument("--runs", nargs="+", default=None, help="only these runs (default: every run)")
     probe.add_argument("--config", default="tuned", help="the scenario they play")
     probe_at = probe.add_mutually_exclusive_group()
@@ -662,7 +650,7 @@ def main() -> None:
                                       "strength-small, schedules or a YAML file of self-play runs; the options "
                                       "below replace its own")
     sub.choices["train"].add_argument("--schedules", nargs="+", default=None,
-                                      choices=["alternating", "simultaneous", "league"])
+                                      choices=["alternating", "simultaneous", "league", "nash"])
     sub.choices["train"].add_argument("--beliefs", nargs="+", default=None)
     sub.choices["train"].add_argument("--seeds", nargs="+", type=int, default=None)
     sub.choices["train"].add_argument("--cpu-hours", type=float, default=None)

@@ -57,3 +57,24 @@ def file_digest(path: str | Path, length: int = 20) -> str:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()[:length]
+
+
+MAX_RECORD_BYTES = 64 << 20  # a JSON record pecli reads back: results, mixtures, best-response summaries
+
+
+def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) -> Any:
+    """The JSON in ``path``, read as data: :class:`~pecli.errors.PecliError` (one line naming ``what``) if it is
+    missing, larger than ``max_bytes``, not JSON or nested too deep to parse."""
+    from pecli.errors import PecliError
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise PecliError(f"{path}: {size:,} bytes is more than a {what} can be ({max_bytes:,})")
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise PecliError(f"{path}: no {what} there") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        reason = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
+        raise PecliError(f"{path}: not a readable {what} ({reason})") from None

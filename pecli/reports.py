@@ -7,8 +7,11 @@ from pathlib import Path
 
 import numpy as np
 from rich.table import Table
+from rich.text import Text
 
 from pecli.io import atomic_path, atomic_write_json
+from pecli.metagame import WEIGHT_FLOOR, MetaGame
+from pecli.policies.nash import NASH_FILE
 from pecli.tournament import TournamentResults
 
 
@@ -70,6 +73,49 @@ def write_reports(results: TournamentResults, out: Path) -> list[Path]:
                              f"{row['capture_rate']:.4f}", f"{row['time_to_capture_mean']:.4f}",
                              f"{row['time_to_capture_std']:.4f}", row["best_in_row"]])
     return [out / "results.json", out / "results.csv", heatmap(results, out / "capture_rates.png")]
+
+
+def nash_record(results: TournamentResults, game: MetaGame) -> dict:
+    """What ``nash.json`` holds (:mod:`pecli.policies.nash` reads it): each side's equilibrium members with their
+    policy strings and weights, the game's value and every player's exploitability within the zoo."""
+    specs = {p.name: p.spec for players in results.players.values() for p in players}
+
+    def members(role: str) -> list[dict]:
+        return [{"name": name, "spec": specs[name], "weight": weight} for name, weight in game.support(role).items()]
+
+    return {"kind": "nash", "scenario": results.scenario.name, "scenario_hash": results.scenario.fingerprint(),
+            "value": game.value, "pursuer": members("pursuer"), "evader": members("evader"),
+            "exploitability": game.exploitability()}
+
+
+def write_nash(results: TournamentResults, game: MetaGame, out: Path) -> Path:
+    """Write ``out/nash.json``: the zoo's Nash mixture, a player as ``nash:OUT``."""
+    path = out / NASH_FILE
+    atomic_write_json(path, nash_record(results, game))
+    return path
+
+
+def nash_table(game: MetaGame, limit: int | None = None) -> Table:
+    """The equilibrium mixture of each side and every player's exploitability within the zoo, the least first."""
+    table = Table(title=f"the zoo's Nash equilibrium: value {game.value:.3f} (the capture rate each side's mixture "
+                        "guarantees)",
+                  caption="exploitability: how far the zoo's best reply to the player moves its capture rate past "
+                          "the value (0: the player is an equilibrium strategy)")
+    for column, justify in (("player", "left"), ("role", "left"), ("weight", "right"), ("exploitability", "right"),
+                            ("worst reply in the zoo", "left")):
+        table.add_column(column, justify=justify, overflow="fold")
+    exploitability = game.exploitability()
+    rows = []
+    for i, name in enumerate(game.pursuers):
+        worst = game.evaders[int(np.argmin(game.matrix[i]))]
+        rows.append((exploitability[name], name, "pursuer", float(game.pursuer_mixture[i]), worst))
+    for j, name in enumerate(game.evaders):
+        worst = game.pursuers[int(np.argmax(game.matrix[:, j]))]
+        rows.append((exploitability[name], name, "evader", float(game.evader_mixture[j]), worst))
+    rows.sort(key=lambda row: (row[0], -row[3]))
+    for value, name, role, weight, worst in rows[:limit]:
+        table.add_row(Text(name), role, f"{weight:.3f}" if weight > WEIGHT_FLOOR else "-", f"{value:.3f}", Text(worst))
+    return table
 
 
 def heatmap(results: TournamentResults, path: Path) -> Path:

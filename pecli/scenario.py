@@ -231,10 +231,16 @@ class SelfPlay(_Model):
         description="alternating: one side trains at a time against the other's pool; simultaneous: both "
         "learners in the same games, both learning every step (the paper's MADDPG)",
     )
-    opponents: Literal["latest", "uniform", "pfsp", "league"] = Field(
+    opponents: Literal["latest", "uniform", "pfsp", "league", "nash"] = Field(
         default="pfsp",
         description="latest: the newest opponents; uniform: the whole pool; pfsp: weighted by how often they win; "
-        "league: pfsp with exploiters and the scripted players kept in the pool (AlphaStar's league)",
+        "league: pfsp with exploiters and the scripted players kept in the pool (AlphaStar's league); nash: the "
+        "league with the Nash mixture of the pools' meta-game in place of pfsp (PSRO's meta-solver)",
+    )
+    nash_games: int = Field(
+        default=100, ge=1, le=100_000,
+        description="(ours) nash: games each new pairing of the two pools plays for the meta-game's capture matrix "
+        "(its CPU counts in the run's budget)",
     )
     pfsp_power: Real = Field(default=2.0, gt=0, description="(ours) PFSP weight = P(opponent wins)^power")
     pfsp_prior_episodes: Real = Field(
@@ -298,8 +304,9 @@ class SelfPlay(_Model):
 
     @model_validator(mode="after")
     def _league_alternates(self) -> SelfPlay:
-        if self.opponents == "league" and self.schedule != "alternating":
-            raise ValueError("opponents 'league' needs the alternating schedule (the simultaneous one has no pools)")
+        if self.opponents in ("league", "nash") and self.schedule != "alternating":
+            raise ValueError(f"opponents '{self.opponents}' needs the alternating schedule (the simultaneous one has "
+                             "no pools)")
         if self.league_floor + self.league_exploiter_share > 1:
             raise ValueError(f"league_floor ({self.league_floor}) and league_exploiter_share "
                              f"({self.league_exploiter_share}) together keep more than all the games")

@@ -1,5 +1,5 @@
-"""Statistics for comparing policies: the paper's two-proportion z-test, its stratified form (Mantel–Haenszel) and
-Bradley–Terry ratings."""
+"""Statistics for comparing policies: the paper's two-proportion z-test, its stratified form (Mantel–Haenszel),
+intervals of capture rates and of their differences, and Bradley–Terry ratings."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 from scipy.special import expit, log_expit
+from scipy.stats import binomtest
 
 
 def two_proportion_z_test(successes_a: int, n_a: int, successes_b: int, n_b: int) -> float:
@@ -128,3 +129,23 @@ def bradley_terry(
         Rating(name=names[p], elo=ELO_BASE + ELO_SCALE * centred[p], stderr=ELO_SCALE * stderr[p], games=int(played[p]))
         for p in range(k)
     ]
+
+
+def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The Wilson score interval of a capture rate ``successes / n`` (SciPy's ``binomtest``)."""
+    if n < 1 or not 0 <= successes <= n:
+        raise ValueError(f"an interval needs 0 <= successes <= n and n >= 1, not {successes}/{n}")
+    interval = binomtest(successes, n).proportion_ci(confidence_level=confidence, method="wilson")
+    return float(interval.low), float(interval.high)
+
+
+def difference_interval(successes_a: int, n_a: int, successes_b: int, n_b: int,
+                        confidence: float = 0.95) -> tuple[float, float]:
+    """An interval for the difference of two independent capture rates ``a - b`` (Newcombe's hybrid score
+    interval, built from each rate's Wilson interval; it stays within [-1, 1] and behaves near 0 and 1)."""
+    p_a, p_b = successes_a / n_a, successes_b / n_b
+    low_a, high_a = wilson_interval(successes_a, n_a, confidence)
+    low_b, high_b = wilson_interval(successes_b, n_b, confidence)
+    d = p_a - p_b
+    return (d - math.sqrt((p_a - low_a) ** 2 + (high_b - p_b) ** 2),
+            d + math.sqrt((high_a - p_a) ** 2 + (p_b - low_b) ** 2))

@@ -29,6 +29,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json, file_digest
@@ -38,6 +40,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
+from pecli.metagame import MetaGame, solve
 from pecli.stats import Rating, bradley_terry, ties_with_best
 from pecli.zoo import LAST, RESUME_DIR, CheckpointMeta, ZooError, checkpoint_problem, read_metadata
 
@@ -434,6 +437,19 @@ class TournamentResults:
             ties = ties_with_best([r.captures for r in row], [r.episodes for r in row])
             marked |= {(r.pursuer, r.evader) for r, tie in zip(row, ties) if tie}
         return marked
+
+    def meta_game(self) -> MetaGame:
+        """The zoo's meta-game (:mod:`pecli.metagame`) solved: every pursuer against every evader;
+        :class:`PecliError` if a pairing was not played (a ``--sample`` tournament)."""
+        grid = self.grid()
+        pursuers = [p.name for p in self.players["pursuer"]]
+        evaders = [e.name for e in self.players["evader"]]
+        missing = [(p, e) for p in pursuers for e in evaders if (p, e) not in grid]
+        if missing:
+            raise PecliError(f"the Nash equilibrium needs every pairing; {len(missing)} were not played "
+                             f"(e.g. {missing[0][0]} vs {missing[0][1]}): leave out --sample")
+        matrix = np.array([[grid[p, e].capture_rate for e in evaders] for p in pursuers])
+        return solve(pursuers, evaders, matrix)
 
     def to_json(self) -> dict[str, Any]:
         best = self.best_in_row()

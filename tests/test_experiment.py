@@ -506,6 +506,8 @@ def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
     cell = next(c for c in data["cells"] if (c["pursuer"], c["evader"]) == ("Ours", "Greedy"))
     assert cell["paper_capture_rate"] == 0.98 and cell["fewer_episodes_than_paper"]
     assert abs(cell["difference"] - (cell["capture_rate"] - 0.98)) < 1e-3
+    assert "| rating | ± se | exploitability |" in text  # within the tournament's meta-game, every player met all
+    assert all(0.0 <= r["exploitability"] <= 1.0 for r in data["ratings"])
     assert (out / "table.png").stat().st_size > 1000 and (out / "tournament" / "results.json").is_file()
     assert len(json.loads((out / "experiment.json").read_text())["sessions"]) == 2
     result = runner.invoke(app, ["experiment", "status", str(out)])

@@ -250,3 +250,37 @@ def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_
     assert again.parent == "" and again.steps == 240
     assert len(state(run)["turns"]) == 8
     assert np.all([t["steps"] > 0 for t in state(run)["turns"]])
+
+
+def test_nash_weights_are_the_mixture_around_the_league_floor() -> None:
+    pool = OpponentPool("evader")
+    for name in ("greedy", "hider"):
+        pool.add(name, name, generation=0)
+    pool.add("evader-r001", "evader/round-001.zip", generation=1)
+    nash = pool.weights("nash", floor=0.2, nash={"evader-r001": 1.0})
+    assert nash == pytest.approx([0.1, 0.1, 0.8])  # the floor to the scripted players, the rest to the mixture
+    assert pool.weights("nash", floor=0.0, nash={"hider": 0.25, "evader-r001": 0.75}) == pytest.approx([0, 0.25, 0.75])
+    assert pool.weights("nash", floor=0.0, nash={}) == pytest.approx([1 / 3] * 3)  # no mixture yet: uniform
+
+
+def test_nash_opponents_play_the_meta_game_and_draw_its_mixture(quick: Scenario, tmp_path: Path) -> None:
+    nash = with_overrides(quick, {**TINY, "selfplay.opponents": "nash", "selfplay.nash_games": 8,
+                                  "selfplay.league_exploiter_every": 0, "selfplay.league_floor": 0.0})
+    SelfPlay(SelfPlayJob(nash, tmp_path, "ps", seed=0, progress=False), report=lambda line: None).run()
+    run = tmp_path / "ps"
+    record = state(run)
+    pursuers = [e["name"] for e in record["pools"]["pursuer"]["entries"]]
+    evaders = [e["name"] for e in record["pools"]["evader"]["entries"]]
+    assert "evader-r001" in evaders and "pursuer-r002" in pursuers
+    played = set(record["payoffs"])
+    assert {f"{p}|{e}" for p in pursuers[:-1] for e in evaders[:-1]} <= played  # every pairing before the last round's
+    assert all(games == 8 and 0 <= captures <= 8 for captures, games in record["payoffs"].values())
+    # round 2's pursuer drew its evaders by the Nash mixture of the meta-game as it stood then
+    from pecli.metagame import solve
+
+    before = [e for e in evaders if e != "evader-r002"]
+    names = [p for p in pursuers if p != "pursuer-r002"]
+    matrix = np.array([[record["payoffs"][f"{p}|{e}"][0] / 8 for e in before] for p in names])
+    mixture = solve(names, before, matrix).support("evader")
+    weights = {o["name"]: o["weight"] for o in read_metadata(run / "pursuer" / "round-002.zip").opponents}
+    assert weights == pytest.approx({e: mixture.get(e, 0.0) for e in before}, abs=1e-3)

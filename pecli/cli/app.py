@@ -10,7 +10,7 @@ import typer
 
 from pecli import __version__
 from pecli.trust import TRUST_VARIABLE
-from pecli.cli import config, experiment, export, hj, play, selfplay, tournament, train, tune, zoo
+from pecli.cli import config, experiment, exploit, export, hj, play, selfplay, tournament, train, tune, zoo
 
 app = typer.Typer(
     name="pecli",
@@ -53,6 +53,7 @@ app.command(name="play", rich_help_panel="Play and evaluate")(play.play)
 app.command(name="tournament", rich_help_panel="Play and evaluate")(tournament.tournament)
 app.command(name="train", rich_help_panel="Learn")(train.train)
 app.command(name="selfplay", rich_help_panel="Learn")(selfplay.selfplay)
+app.command(name="exploit", rich_help_panel="Play and evaluate")(exploit.exploit)
 app.add_typer(tune.app, name="tune", rich_help_panel="Learn")
 app.add_typer(experiment.app, name="experiment", rich_help_panel="Learn")
 app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")

@@ -26,6 +26,7 @@ class OpponentsChoice(str, enum.Enum):
     uniform = "uniform"
     pfsp = "pfsp"
     league = "league"
+    nash = "nash"
 
 
 @user_errors
@@ -54,8 +55,9 @@ def selfplay(
     opponents: Annotated[
         OpponentsChoice | None,
         typer.Option("--opponents", help="How opponents are drawn from the pool: latest, uniform (fictitious self-play), "
-                     "pfsp (prioritised by how often they win) or league (pfsp, plus an exploiter per side and "
-                     "pecli's scripted adversaries kept in the pools). Default: the config's, pfsp."),
+                     "pfsp (prioritised by how often they win), league (pfsp, plus an exploiter per side and "
+                     "pecli's scripted adversaries kept in the pools) or nash (the league, with the Nash mixture of "
+                     "the pools' meta-game in place of pfsp: PSRO). Default: the config's, pfsp."),
     ] = None,
     seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, draws, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),

@@ -42,6 +42,11 @@ def tournament(
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Reuse the pairings already played in --out.")] = False,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the --sample draw.")] = 0,
+    nash: Annotated[
+        bool,
+        typer.Option("--nash", help="Solve the zoo's meta-game: print each side's Nash mixture and every player's "
+                     "exploitability within the zoo, and write nash.json (the mixture plays as nash:OUT)."),
+    ] = False,
 ) -> None:
     """Play pursuers against evaders and report capture rate and time-to-capture per pairing.
 
@@ -52,10 +57,12 @@ def tournament(
     [bold]--resume[/] reuses.
     """
     from pecli.locks import locked
-    from pecli.reports import ratings_table, results_table, write_reports
+    from pecli.reports import nash_record, nash_table, ratings_table, results_table, write_nash, write_reports
     from pecli.tournament import find_players, run_tournament, schedule
 
     require_batch(episodes, "add --seeds instead")
+    if nash and sample is not None:
+        raise PecliError("--nash needs every pairing: leave out --sample")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []
@@ -100,12 +107,22 @@ def tournament(
                 results = run_tournament(scenario, found.players, pairings, episodes, list(range(seeds)), out,
                                          workers=workers, on_result=report)
             written = write_reports(results, out)
+            game = results.meta_game() if nash else None
+            if game is not None:
+                written.append(write_nash(results, game, out))
             if as_json:
-                typer.echo(json.dumps(results.to_json(), indent=2))
+                data = results.to_json()
+                if game is not None:
+                    data["nash"] = nash_record(results, game)
+                typer.echo(json.dumps(data, indent=2))
                 return
             if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
                 console.print(results_table(results))
             console.print(ratings_table(results, limit=40))
+            if game is not None:
+                console.print(nash_table(game, limit=40))
+                err_console.print(f"the mixture plays as nash:{out} (each game draws one member by its weight)",
+                                  highlight=False, markup=False)
             err_console.print("wrote " + ", ".join(str(p) for p in written), highlight=False)
     except KeyboardInterrupt:
         err_console.print(f"[yellow]interrupted[/]: the finished pairings are cached in {out}; continue with --resume",

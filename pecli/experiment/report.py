@@ -15,10 +15,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from pecli.errors import PecliError
 from pecli.experiment.pipeline import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text
+from pecli.metagame import solve
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role
 from pecli.stats import Rating, ties_with_best
@@ -172,6 +175,17 @@ class ExperimentReport:
         by_key = {p.name: (p.spec, p.role) for role in ROLES for p in players[role]}
         return [(*by_key[r.name], r) for r in rate(players, pairings)]
 
+    def exploitability(self) -> dict[str, float]:
+        """Each player's exploitability within the tournament (:mod:`pecli.metagame`): how far the tournament's best
+        reply moves its capture rate past the meta-game's value; empty if a pairing was not played."""
+        names = {role: [r["name"] for r in self.data["ratings"] if r["role"] == role] for role in ROLES}
+        rates = {(r["pursuer"], r["evader"]): r["captures"] / r["episodes"] for r in self.data["pairings"]
+                 if isinstance(r.get("episodes"), int) and r["episodes"] > 0}
+        if not all(names.values()) or any((p, e) not in rates for p in names["pursuer"] for e in names["evader"]):
+            return {}
+        matrix = np.array([[rates[p, e] for e in names["evader"]] for p in names["pursuer"]])
+        return solve(names["pursuer"], names["evader"], matrix).exploitability()
+
     def markdown(self) -> str:
         spec, grid = self.experiment.spec, self.experiment.spec.runs
         budget = (f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
@@ -206,11 +220,16 @@ class ExperimentReport:
                   "| ---: | --- | --- | ---: | ---: |"]
         for rank, (group, role, r) in enumerate(self.group_ratings(), start=1):
             lines.append(f"| {rank} | {group} | {role} | {r.elo:.0f} | {r.stderr:.0f} |")
-        lines += ["", "Models (each kept checkpoint and heuristic):", "", "| # | player | group | role | rating | ± se |",
-                  "| ---: | --- | --- | --- | ---: | ---: |"]
+        exploitability = self.exploitability()
+        lines += ["", "Models (each kept checkpoint and heuristic; exploitability: within this tournament's meta-game, "
+                  "how far its best reply here moves the player's capture rate past the game's value, "
+                  "`pecli exploit` for a best response trained on it):", "",
+                  "| # | player | group | role | rating | ± se | exploitability |",
+                  "| ---: | --- | --- | --- | ---: | ---: | ---: |"]
         for rank, r in enumerate(self.data["ratings"], start=1):
+            value = exploitability.get(r["name"])
             lines.append(f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
-                         f"{r['stderr']:.0f} |")
+                         f"{r['stderr']:.0f} | {'-' if value is None else f'{value:.2f}'} |")
         lines += ["", "![capture rate per cell](table.png)", ""]
         return "\n".join(lines)
 
@@ -244,6 +263,7 @@ class ExperimentReport:
         return text
 
     def to_json(self) -> dict[str, Any]:
+        exploitability = self.exploitability()
         return {
             "experiment": self.experiment.spec.name,
             "table": self.table,
@@ -252,7 +272,8 @@ class ExperimentReport:
             "groups": self.groups,
             "cells": [c.to_dict() for c in self.cells],
             "group_ratings": [{**asdict(r), "name": group, "role": role} for group, role, r in self.group_ratings()],
-            "ratings": [{**r, "group": self.player_group[r["name"]]} for r in self.data["ratings"]],
+            "ratings": [{**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
+                        for r in self.data["ratings"]],
         }
 
 

@@ -48,16 +48,18 @@ from pecli.scenario import (
 )
 
 BeliefKind = Literal["none", "bimdn", "bimdn-mixed", "ukf", "image"]
-Schedule = Literal["selfplay", "alternating", "simultaneous", "league", "pursuer", "evader"]
-SELFPLAY_SCHEDULES = ("selfplay", "alternating", "simultaneous", "league")
+Schedule = Literal["selfplay", "alternating", "simultaneous", "league", "nash", "pursuer", "evader"]
+SELFPLAY_SCHEDULES = ("selfplay", "alternating", "simultaneous", "league", "nash")
 """Schedules of a self-play run: ``selfplay`` as the scenario says (alternating unless it sets otherwise),
 ``alternating`` (one side at a time), ``simultaneous`` (both sides learn in the same games), ``league``
-(alternating, with exploiters and the scripted players kept in the pools)."""
+(alternating, with exploiters and the scripted players kept in the pools), ``nash`` (the league with opponents
+drawn by the Nash mixture of the pools' meta-game, PSRO)."""
 SELFPLAY_SETTINGS: dict[str, dict[str, object]] = {
     "selfplay": {},
     "alternating": {"selfplay.schedule": "alternating"},
     "simultaneous": {"selfplay.schedule": "simultaneous"},
     "league": {"selfplay.schedule": "alternating", "selfplay.opponents": "league"},
+    "nash": {"selfplay.schedule": "alternating", "selfplay.opponents": "nash"},
 }
 assert set(BeliefKind.__args__) == set(BELIEF_KINDS)  # type: ignore[attr-defined]
 

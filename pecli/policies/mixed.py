@@ -49,6 +49,7 @@ class MixedPolicy:
             if member.role != role:
                 raise ValueError(f"every member must play {role}; {member!r} plays {member.role}")
         self.role = role
+        self.identity: str | None = None  # what a tournament's cache knows the mixture by, when it has a fixed one
         self.members = list(members)
         self.names = list(names)
         self.weights = np.full(len(members), 1.0 / len(members)) if weights is None else weights

@@ -6,7 +6,9 @@ A policy string is one of:
   (either); pecli's adversaries ``interceptor`` (pursuer), ``circler``, ``blindside``, ``wall-runner``,
   ``hider``, ``corner-sitter`` (evaders, :mod:`pecli.policies.adversarial`);
 * a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
-  ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`);
+  ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`), ``nash``
+  (``nash:FOLDER``: the Nash mixture of a zoo that ``pecli tournament --nash`` wrote, see
+  :mod:`pecli.policies.nash`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
   take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
 * a file path, loaded by the loader registered for its suffix: ``.zip`` checkpoints, ``.onnx``
@@ -58,10 +60,16 @@ def _load_hj_file(path: Path, role: Role, scenario: Scenario, seed: int | None) 
     return _load_hj(f"solution={path}", role, scenario, seed)
 
 
+def _load_nash(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    from pecli.policies.nash import load_nash_policy  # a zoo's Nash mixture (pecli tournament --nash)
+
+    return load_nash_policy(options, role, scenario, seed)
+
+
 _LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported, ".npz": _load_hj_file}
 
 Family = Callable[[str, Role, Scenario, "int | None"], Policy]
-_FAMILIES: dict[str, Family] = {"hj": _load_hj}
+_FAMILIES: dict[str, Family] = {"hj": _load_hj, "nash": _load_nash}
 
 
 def register_loader(suffix: str, loader: Loader) -> None:

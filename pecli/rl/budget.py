@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from pecli.rl.pool import EXPLOITER, MAIN
+from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN
 from pecli.roles import ROLES
 
 if TYPE_CHECKING:
@@ -31,7 +31,7 @@ def scheduled_turns(settings: SelfPlaySettings, turns: Turns, round: int) -> lis
     """The ``(learner, role)`` turns of ``round``: both main learners, then the sides of ``league_exploiter_roles``
     in every ``league_exploiter_every``-th round of a league (never if 0), once the rounds before it spent
     ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""
-    every = settings.league_exploiter_every if settings.opponents == "league" else 0
+    every = settings.league_exploiter_every if settings.opponents in LEAGUES else 0
     exploiters = bool(every) and round % every == 0 and \
         cpu_through(turns, round - 1) >= 3600.0 * settings.league_exploiter_after
     return [(MAIN, role) for role in ROLES] + \

@@ -217,17 +217,23 @@ class Evaluation(BaseCallback):
         clock: Callable[[], float] = time.process_time,
         on_best: Callable[[float], None] | None = None,
         maximise: bool = True,
+        cpu_every: float | None = None,
+        on_record: Callable[[int, float, float], None] | None = None,
     ) -> None:
         super().__init__()
-        self.evaluate, self.clock, self.on_best = evaluate, clock, on_best
+        self.evaluate, self.clock, self.on_best, self.on_record = evaluate, clock, on_best, on_record
         self.sign = 1.0 if maximise else -1.0
         self.best = -math.inf  # the best score, sign * capture rate
         self.every = every
+        self.cpu_every = cpu_every  # instead of every ``every`` transitions: every ``cpu_every`` s of ``clock()``
         self.csv_path = csv_path
-        self._next = 0
+        self._next = 0.0
 
     def _on_training_start(self) -> None:
-        self._next = (self.num_timesteps // self.every + 1) * self.every
+        if self.cpu_every:
+            self._next = (self.clock() // self.cpu_every + 1) * self.cpu_every
+        else:
+            self._next = (self.num_timesteps // self.every + 1) * self.every
         if self.csv_path.exists():  # a resumed run: its best so far is in its log
             with self.csv_path.open(newline="") as handle:
                 rates = [_number(row.get("capture_rate")) for row in csv.DictReader(handle)]
@@ -238,7 +244,11 @@ class Evaluation(BaseCallback):
         self._wall = time.perf_counter()
 
     def _on_step(self) -> bool:
-        if self.num_timesteps >= self._next:
+        if self.cpu_every:
+            if self.clock() >= self._next:
+                self._next = (self.clock() // self.cpu_every + 1) * self.cpu_every
+                self.record()
+        elif self.num_timesteps >= self._next:
             self._next += self.every
             self.record()
         return True
@@ -246,15 +256,29 @@ class Evaluation(BaseCallback):
     def record(self) -> float:
         rate = self.evaluate(self.model)
         self.logger.record("eval/capture_rate", rate)
+        cpu = self.clock()
         with self.csv_path.open("a", newline="") as handle:
             csv.writer(handle).writerow(
-                [self.num_timesteps, f"{self.clock():.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
+                [self.num_timesteps, f"{cpu:.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
             )
+        if self.on_record is not None:
+            self.on_record(self.num_timesteps, cpu, rate)
         if self.sign * round(rate, 4) > self.best:  # as logged, so a resumed run's tie is no new best
             self.best = self.sign * round(rate, 4)
             if self.on_best is not None:
                 self.on_best(rate)
         return rate
+
+
+class CpuBudget(BaseCallback):
+    """Stops learning at the first step at which ``clock()`` (the run's CPU seconds) reaches ``seconds``."""
+
+    def __init__(self, clock: Callable[[], float], seconds: float) -> None:
+        super().__init__()
+        self.clock, self.seconds = clock, seconds
+
+    def _on_step(self) -> bool:
+        return self.clock() < self.seconds
 
 
 class PoolTracker(BaseCallback):

@@ -9,6 +9,9 @@ Four ways to draw (``training.selfplay.opponents``):
              against what still beats it. ``p`` pools the learner's own episodes against the entry
              with a prior worth ``prior_episodes`` episodes: the prediction of a tournament's
              ratings when one rated both, else 0.5.
+``nash``     the league's structure (floor, exploiters' share) around the Nash mixture of the pools' meta-game
+             (:mod:`pecli.metagame`, PSRO's meta-solver, Lanctot et al. 2017) instead of pfsp: the learner
+             practises against the mixture of the other side that no player of its own side's pool beats.
 ``league``   pfsp, with the scripted players (generation 0) keeping ``floor`` of the draws
              between them whatever their records, so that a learner never forgets them; the floor
              is split among them alike (``split="uniform"``) or by their pfsp weights (``"pfsp"``:
@@ -30,7 +33,8 @@ from pecli.roles import Role
 from pecli.stats import ELO_SCALE
 
 MAIN, EXPLOITER = "main", "exploiter"  # the league's learners: one main and one exploiter per side
-STRATEGIES = ("latest", "uniform", "pfsp", "league")
+STRATEGIES = ("latest", "uniform", "pfsp", "league", "nash")
+LEAGUES = ("league", "nash")  # the rules with a league's structure: scripted floor, exploiters
 FLOOR_SPLITS = ("uniform", "pfsp")
 MIN_SHARE = 0.02  # (ours) pfsp never starves an entry: each keeps >= 2 % of a uniform draw's share
 
@@ -97,9 +101,11 @@ class OpponentPool:
         floor: float = 0.0,
         split: str = "uniform",
         exploiter_share: float = 0.0,
+        nash: dict[str, float] | None = None,
     ) -> np.ndarray:
         """Draw probabilities of the entries under ``strategy``, ``(entries,)``; ``floor``, ``split`` and
-        ``exploiter_share`` only for ``league``."""
+        ``exploiter_share`` only for ``league`` and ``nash``, ``nash`` (the meta-game's mixture of this pool, by
+        entry name) only for ``nash``."""
         if not self.entries:
             raise ValueError(f"the {self.role} pool is empty")
         k = len(self.entries)
@@ -108,10 +114,11 @@ class OpponentPool:
         elif strategy == "latest":
             newest = max(e.generation for e in self.entries)
             w = np.array([float(e.generation == newest) for e in self.entries])
-        elif strategy == "league":
+        elif strategy in LEAGUES:
             if split not in FLOOR_SPLITS:
                 raise ValueError(f"unknown league floor split '{split}' (known: {', '.join(FLOOR_SPLITS)})")
             pfsp = self.weights("pfsp", power, priors, prior_episodes)
+            base = pfsp if strategy == "league" else self._mixture(nash or {})
             scripted = np.array([e.generation == 0 for e in self.entries], dtype=float)
             exploiters = np.array([e.kind == EXPLOITER for e in self.entries], dtype=float)
             kept, w = 0.0, np.zeros(k)
@@ -120,7 +127,7 @@ class OpponentPool:
                     part = group * pfsp if by == "pfsp" else group
                     w += share * part / part.sum()
                     kept += share
-            w += (1.0 - kept) * pfsp
+            w += (1.0 - kept) * base
         elif strategy == "pfsp":
             priors = priors or {}
             p = np.array([e.win_rate(priors.get(e.name, 0.5), prior_episodes) for e in self.entries])
@@ -130,6 +137,11 @@ class OpponentPool:
         else:
             raise ValueError(f"unknown opponent sampling '{strategy}' (known: {', '.join(STRATEGIES)})")
         return w / w.sum()
+
+    def _mixture(self, weights: dict[str, float]) -> np.ndarray:
+        """The entries' weights in a mixture given by name (absent: 0), normalised; uniform if none has weight."""
+        w = np.array([max(0.0, float(weights.get(e.name, 0.0))) for e in self.entries])
+        return w / w.sum() if w.sum() > 0 else np.full(len(self.entries), 1.0 / len(self.entries))
 
     def to_dict(self) -> dict[str, Any]:
         return {"role": self.role, "entries": [asdict(e) for e in self.entries]}

@@ -41,6 +41,8 @@ from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
 from pecli.io import atomic_write_json
+from pecli.match import play_match
+from pecli.metagame import solve
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
@@ -57,7 +59,7 @@ from pecli.rl.callbacks import (
     RoundDisplay,
     every_episodes,
 )
-from pecli.rl.pool import EXPLOITER, MAIN, OpponentPool, predicted_win_rate
+from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN, OpponentPool, predicted_win_rate
 from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
 from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
@@ -125,6 +127,7 @@ class SelfPlayState:
     pools: dict[str, OpponentPool]
     turns: list[Turn] = field(default_factory=list)
     cpu_hours: float | None = None  # the CPU budget: the run stops after the first round that reaches it
+    payoffs: dict[str, list[int]] = field(default_factory=dict)  # opponents nash: "pursuer|evader" -> [captures, games]
 
     def done(self, round: int, role: Role, learner: str = MAIN) -> bool:
         return any(t.round == round and t.role == role and t.learner == learner for t in self.turns)
@@ -148,6 +151,7 @@ class SelfPlayState:
             "pools": {role: pool.to_dict() for role, pool in self.pools.items()},
             "turns": self.records(),
             "cpu_hours": self.cpu_hours,
+            "payoffs": self.payoffs,
         }
 
     @classmethod
@@ -158,6 +162,7 @@ class SelfPlayState:
             pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
             turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
             cpu_hours=None if data.get("cpu_hours") is None else float(data["cpu_hours"]),  # absent in older records
+            payoffs={str(key): [int(value[0]), int(value[1])] for key, value in data.get("payoffs", {}).items()},
         )
 
 
@@ -213,7 +218,7 @@ def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
     sp = scenario.training.selfplay
     pools = {role: OpponentPool(role) for role in ROLES}
     for role in ROLES:
-        for name in builtin_names(role, paper_only=sp.opponents != "league"):  # a league keeps pecli's adversaries too
+        for name in builtin_names(role, paper_only=sp.opponents not in LEAGUES):  # a league keeps pecli's adversaries
             pools[role].add(name, name, generation=0)
     return SelfPlayState(seed=seed, curriculum_steps=sp.rounds * sp.steps_per_round, pools=pools)
 
@@ -323,8 +328,34 @@ class SelfPlay:
 
     def _weigher(self, learner: Role) -> Callable[[OpponentPool], np.ndarray]:
         sp, priors = self.settings, self._priors(learner)
+        nash = self._nash_mixture(opponent_of(learner)) if sp.opponents == "nash" else None
         return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
-                                         sp.league_floor_split, sp.league_exploiter_share)
+                                         sp.league_floor_split, sp.league_exploiter_share, nash)
+
+    def _nash_mixture(self, side: Role) -> dict[str, float]:
+        """``side``'s Nash mixture of the meta-game between the two pools (:mod:`pecli.metagame`), after playing
+        the pairings not yet in the record (``nash_games`` games each, from the same start states; the record is
+        saved, so a resumed run plays none twice)."""
+        pursuers, evaders = self.state.pools["pursuer"].entries, self.state.pools["evader"].entries
+        missing = [(p, e) for p in pursuers for e in evaders if f"{p.name}|{e.name}" not in self.state.payoffs]
+        if missing:
+            loaded: dict[tuple[Role, str], Policy] = {}  # fresh players: the pools' own are sized for the learner's games
+
+            def player(role: Role, spec: str) -> Policy:
+                if (role, spec) not in loaded:
+                    path = self.run_dir.path / spec
+                    loaded[role, spec] = resolve_policy(str(path) if spec.endswith(".zip") else spec, role,
+                                                        self.scenario, seed=self.job.seed)
+                return loaded[role, spec]
+
+            for p, e in missing:
+                match, _ = play_match(self.scenario, player("pursuer", p.spec), player("evader", e.spec),
+                                      self.settings.nash_games, seed=self.state.seed)
+                self.state.payoffs[f"{p.name}|{e.name}"] = [int(match.captured.sum()), match.episodes]
+            self._save_state()
+        matrix = np.array([[self.state.payoffs[f"{p.name}|{e.name}"][0] / self.state.payoffs[f"{p.name}|{e.name}"][1]
+                            for e in evaders] for p in pursuers])
+        return solve([p.name for p in pursuers], [e.name for e in evaders], matrix).support(side)
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
@@ -471,7 +502,9 @@ class SelfPlay:
             pool = self.state.pools[other]
             if self.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
                 pool.decay(sp.pfsp_decay)
-            weigh = self._weigher(role)
+            meta_cpu = time.process_time()
+            weigh = self._weigher(role)  # with opponents nash, the meta-game's new pairings play here: their CPU counts
+            meta_cpu = time.process_time() - meta_cpu
             mixed = self._mixed(other)
             mixed.weights = weigh(pool)
             tracker = PoolTracker(pool, mixed, weigh if sp.opponents in ("pfsp", "league") else None)
@@ -490,6 +523,8 @@ class SelfPlay:
             progress = {"round": r, "start_steps": int(model.num_timesteps), "cpu_seconds": 0.0}
         else:  # resumed inside the turn: its records so far
             tracker.restore(progress["tracker"])
+        if kind == MAIN:
+            progress["cpu_seconds"] += meta_cpu
         seed = turn_seed(self.state.seed, r, role, kind)
         if model.num_timesteps > progress["start_steps"]:  # new games from a seed of their own
             seed = resume_seed(seed, int(model.num_timesteps))

@@ -1,4 +1,4 @@
-"""Train one role with SB3 TD3/DDPG against a frozen opponent, into a zoo run.
+"""Train one role with an SB3 algorithm (TD3, DDPG, SAC, TQC or CrossQ) against a frozen opponent, into a zoo run.
 
 The whole loop in one place: build the batched view, the centralised-critic model and the
 callbacks, learn, and write checkpoints. Interrupting (Ctrl-C) saves ``last`` with its replay
@@ -27,7 +27,16 @@ from pecli.policies.learned import LearnedPolicy
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.durable import DurableState
-from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation, FiniteCheck, ProgressDisplay, every_episodes
+from pecli.rl.callbacks import (
+    CpuBudget,
+    CurriculumCallback,
+    EpisodeStats,
+    Evaluation,
+    FiniteCheck,
+    ProgressDisplay,
+    every_episodes,
+)
+from pecli.rl.checkpoint import restore_model
 from pecli.rl.extractors import BeliefExtractor
 from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, optimizer_kwargs, policy_kwargs, torch_device
 from pecli.roles import Role, opponent_of
@@ -91,6 +100,9 @@ class TrainJob:
 
     ``curriculum_steps`` is the budget the curriculum is scheduled over: the run's original budget,
     so that a resumed run with a larger ``--steps`` continues the schedule instead of rewinding it.
+    ``cpu_budget`` ends the run at that many CPU seconds even before ``steps``; ``warm_start`` gives a new run
+    the weights and optimiser states of a checkpoint written by the same network (a best response started from
+    a player that already knows the game, :mod:`pecli.exploit`).
     """
 
     role: Role
@@ -103,6 +115,10 @@ class TrainJob:
     progress: bool = True
     curriculum_steps: int | None = None
     device: str = "cpu"  # where the networks train: cpu, cuda or auto (checkpoints always load on the CPU)
+    cpu_budget: float | None = None  # CPU seconds of the run (all its processes) at which it stops, steps or not
+    eval_opponent: str | None = None  # whom evaluations play (default: DEFAULT_OPPONENT of the role)
+    eval_cpu_every: float | None = None  # evaluate every so many CPU seconds instead of every eval_every steps
+    warm_start: Path | None = None  # a checkpoint of this role and network whose weights a new run starts from
 
 
 def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float | None = None) -> CheckpointMeta:
@@ -271,6 +287,8 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
     else:
         run.log_command()
     episodes, cpu_before = 0, 0.0
+    if record is None and job.warm_start is not None:
+        restore_model(model, job.warm_start)
     if record is not None:
         durable.restore(record, model, fit)
         model.set_random_seed(resume_seed(job.seed, record.steps))
@@ -304,16 +322,25 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         callbacks.insert(0, curriculum)
     if fit is not None:
         callbacks.append(fit)
-    if t.eval_every:
-        eval_opponent = DEFAULT_OPPONENT[job.role]
+    if job.cpu_budget is not None:
+        callbacks.insert(0, CpuBudget(cpu_seconds, job.cpu_budget))
+    if t.eval_every or job.eval_cpu_every:
+        eval_opponent = job.eval_opponent or DEFAULT_OPPONENT[job.role]
 
         def save_best(rate: float) -> None:
             meta = meta_now(stats.episodes)
             meta.eval_capture_rate = round(rate, 4)
             run.save(model, job.role, BEST, meta)
 
+        def reported(steps: int, cpu: float, rate: float) -> None:
+            digits = 1 if (job.cpu_budget or cpu) >= 300 else 2
+            budget = f" of {job.cpu_budget / 60:.{digits}f}" if job.cpu_budget else ""
+            report(f"{job.name}: {steps:,} steps, {cpu / 60:.{digits}f}{budget} CPU-min, capture rate vs "
+                   f"{eval_opponent} {rate:.2f}")
+
         callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv",
-                                    cpu_seconds, save_best, maximise=job.role == "pursuer"))
+                                    cpu_seconds, save_best, maximise=job.role == "pursuer",
+                                    cpu_every=job.eval_cpu_every, on_record=reported))
 
     remaining = t.steps - model.num_timesteps
     try:

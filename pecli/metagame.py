@@ -1,0 +1,104 @@
+"""The meta-game of a zoo: its pursuers against its evaders as a zero-sum matrix game, its Nash equilibrium and
+each player's exploitability within the zoo.
+
+The payoff of pursuer ``i`` against evader ``j`` is their capture rate ``M[i, j]``: the pursuer maximises it, the
+evader minimises it. A mixture ``x`` of pursuers guarantees ``min_j (x M)_j``; a mixture ``y`` of evaders concedes
+at most ``max_i (M y)_i``. The Nash equilibrium (the maximin and minimax mixtures, one linear program each) meets at
+the value ``v`` of the game. As in PSRO (Lanctot et al. 2017), the same quantities measure players:
+
+* a pursuer's exploitability within the zoo is ``v - min_j M[i, j]``: how far below the value its worst evader of
+  the zoo holds it; an evader's is ``max_i M[i, j] - v``;
+* the NashConv of a pair of mixtures is ``max_i (M y)_i - min_j (x M)_j``: 0 exactly for an equilibrium.
+
+Everything here is NumPy and SciPy (HiGHS through :func:`scipy.optimize.linprog`), no torch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+WEIGHT_FLOOR = 1e-9  # mixture weights below this are LP round-off, not play
+
+
+@dataclass(frozen=True)
+class MetaGame:
+    """A zoo's pursuers (rows) against its evaders (columns), ``matrix[i, j]`` the capture rate of pursuer ``i``
+    against evader ``j``, with the game's Nash equilibrium."""
+
+    pursuers: tuple[str, ...]
+    evaders: tuple[str, ...]
+    matrix: np.ndarray  # (pursuers, evaders), capture rates in [0, 1]
+    pursuer_mixture: np.ndarray  # (pursuers,): the maximin mixture
+    evader_mixture: np.ndarray  # (evaders,): the minimax mixture
+    value: float  # the capture rate the equilibrium guarantees both ways
+
+    def exploitability(self) -> dict[str, float]:
+        """Each player's exploitability within the zoo (0 for a player that is itself an equilibrium strategy),
+        pursuers first; a capture-rate difference in [0, 1]."""
+        worst_for_pursuer = self.matrix.min(axis=1)
+        worst_for_evader = self.matrix.max(axis=0)
+        found = {name: max(0.0, self.value - float(rate)) for name, rate in zip(self.pursuers, worst_for_pursuer)}
+        found.update({name: max(0.0, float(rate) - self.value) for name, rate in zip(self.evaders, worst_for_evader)})
+        return found
+
+    def support(self, role: str) -> dict[str, float]:
+        """The members of ``role``'s equilibrium mixture with their weights, heaviest first."""
+        names, weights = ((self.pursuers, self.pursuer_mixture) if role == "pursuer"
+                          else (self.evaders, self.evader_mixture))
+        kept = {name: float(w) for name, w in zip(names, weights) if w > WEIGHT_FLOOR}
+        return dict(sorted(kept.items(), key=lambda item: -item[1]))
+
+
+def check_matrix(matrix: np.ndarray) -> np.ndarray:
+    """``matrix`` as a 2-D float array of finite capture rates in [0, 1]; :class:`ValueError` otherwise."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.ndim != 2 or m.shape[0] < 1 or m.shape[1] < 1:
+        raise ValueError(f"a meta-game needs a non-empty pursuers x evaders matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)) or m.min() < 0.0 or m.max() > 1.0:
+        raise ValueError("a meta-game's payoffs are capture rates: finite numbers in [0, 1]")
+    return m
+
+
+def maximin(matrix: np.ndarray) -> tuple[np.ndarray, float]:
+    """The row player's (the maximiser's) equilibrium mixture of a zero-sum game and the game's value.
+
+    maximise v subject to ``sum_i x_i M[i, j] >= v`` for every column ``j``, ``sum x = 1``, ``x >= 0``.
+    """
+    m = check_matrix(matrix)
+    rows, columns = m.shape
+    cost = np.zeros(rows + 1)
+    cost[-1] = -1.0  # linprog minimises: -v
+    upper = np.hstack([-m.T, np.ones((columns, 1))])  # v - (x M)_j <= 0
+    equal = np.hstack([np.ones((1, rows)), np.zeros((1, 1))])
+    bounds = [(0.0, None)] * rows + [(None, None)]
+    solution = linprog(cost, A_ub=upper, b_ub=np.zeros(columns), A_eq=equal, b_eq=[1.0], bounds=bounds,
+                       method="highs")
+    if not solution.success:  # a bounded, feasible LP: only a solver fault lands here
+        raise RuntimeError(f"the meta-game's linear program failed: {solution.message}")
+    x = np.clip(solution.x[:rows], 0.0, None)
+    x[x < WEIGHT_FLOOR] = 0.0
+    return x / x.sum(), float(solution.x[-1])
+
+
+def solve(pursuers: Sequence[str], evaders: Sequence[str], matrix: np.ndarray) -> MetaGame:
+    """The Nash equilibrium of the zero-sum game of capture rates ``matrix`` (pursuers x evaders)."""
+    m = check_matrix(matrix)
+    if m.shape != (len(pursuers), len(evaders)):
+        raise ValueError(f"{len(pursuers)} pursuers and {len(evaders)} evaders, but a {m.shape} matrix")
+    x, value = maximin(m)
+    y, minus_value = maximin(1.0 - m.T)  # the evader maximises the escape rate 1 - M
+    return MetaGame(tuple(pursuers), tuple(evaders), m, x, y, value=0.5 * (value + 1.0 - minus_value))
+
+
+def nash_conv(matrix: np.ndarray, pursuer_mixture: np.ndarray, evader_mixture: np.ndarray) -> float:
+    """``max_i (M y)_i - min_j (x M)_j``: what the best responses within the matrix gain on the pair of mixtures
+    ``(x, y)``; 0 for an equilibrium, at most 1."""
+    m = check_matrix(matrix)
+    x, y = np.asarray(pursuer_mixture, dtype=np.float64), np.asarray(evader_mixture, dtype=np.float64)
+    if x.shape != (m.shape[0],) or y.shape != (m.shape[1],):
+        raise ValueError("each mixture needs one weight per player of its side")
+    return float((m @ y).max() - (x @ m).min())

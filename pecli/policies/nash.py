@@ -1,0 +1,113 @@
+"""``nash:FOLDER``: the Nash mixture of a zoo as one player.
+
+``pecli tournament ... --nash --out FOLDER`` writes ``FOLDER/nash.json``: the equilibrium of the zoo's meta-game
+(:mod:`pecli.metagame`), each side's members with their weights. The policy string ``nash:FOLDER`` (or
+``nash:FOLDER/nash.json``) plays one side of it: every game draws one member by its weight when it starts
+(:class:`~pecli.policies.mixed.MixedPolicy`), so over many games it plays the mixture that no player of the zoo
+exploits.
+
+The file is read as data: its members are built-in names or policy files (a relative path is read from the
+folder); a ``module:Class`` member is imported only with ``--trust``, and a mixture never nests another.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from pecli.errors import PolicyError
+from pecli.policies.base import Policy
+from pecli.roles import Role
+from pecli.scenario import Scenario
+
+NASH_FILE = "nash.json"
+MAX_MEMBERS = 10_000
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="ignore", frozen=True, strict=True, allow_inf_nan=False)
+
+
+class Member(_Record):
+    """One player of a mixture and its weight."""
+
+    name: str = Field(max_length=1000)
+    spec: str = Field(min_length=1, max_length=4096)
+    weight: float = Field(ge=0.0, le=1.0)
+
+
+class NashRecord(_Record):
+    """What ``nash.json`` holds."""
+
+    kind: Literal["nash"] = "nash"
+    scenario: str = Field(max_length=1000)
+    scenario_hash: str = Field(max_length=200)
+    value: float = Field(ge=0.0, le=1.0)
+    pursuer: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
+    evader: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
+    exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
+
+
+def nash_path(options: str) -> Path:
+    """The file a ``nash:`` string names: ``FOLDER/nash.json`` or the ``.json`` file itself."""
+    path = Path(options.strip())
+    return path if path.suffix == ".json" else path / NASH_FILE
+
+
+def read_nash(path: Path) -> NashRecord:
+    """The mixture record at ``path``, validated; :class:`PolicyError` in one line if it is not one."""
+    from pecli.errors import PecliError
+    from pecli.io import read_json
+
+    try:
+        data = read_json(path, "Nash mixture (pecli tournament --nash)")
+        return NashRecord.model_validate(data)
+    except PecliError as exc:
+        raise PolicyError(str(exc)) from None
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise PolicyError(f"{path}: not a Nash mixture ({where}: {first['msg']})") from None
+
+
+def _member_spec(spec: str, folder: Path) -> str:
+    """A member's policy string, a relative file read from ``folder``; refuses what a data file may not name."""
+    from pecli.policies.registry import BUILTINS, family_of
+    from pecli.trust import trusted
+
+    if spec in BUILTINS:
+        return spec
+    if family_of(spec) == "nash":
+        raise PolicyError(f"{spec}: a Nash mixture does not nest another")
+    path = Path(spec)
+    if path.suffix.lower() in (".zip", ".onnx", ".npz"):
+        return str(path if path.is_absolute() else folder / path)
+    if not trusted():
+        raise PolicyError(f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
+                          "no code a file names unless you pass `pecli --trust`")
+    return spec
+
+
+def load_nash_policy(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    """The ``nash:`` family: ``role``'s side of the mixture in ``options`` (a folder or its ``nash.json``)."""
+    from pecli.policies.mixed import MixedPolicy
+    from pecli.policies.registry import resolve_policy
+
+    if not options.strip():
+        raise PolicyError("nash: needs the folder of a tournament run with --nash, e.g. nash:runs/tournament")
+    path = nash_path(options)
+    record = read_nash(path)
+    if record.scenario_hash != scenario.fingerprint():
+        raise PolicyError(f"{path}: its players play scenario '{record.scenario}', not '{scenario.name}': "
+                          "pass the config they were trained with")
+    members = [m for m in (record.pursuer if role == "pursuer" else record.evader) if m.weight > 0]
+    if not members:
+        raise PolicyError(f"{path}: its {role} mixture has no member of positive weight")
+    from pecli.io import file_digest
+
+    policies = [resolve_policy(_member_spec(m.spec, path.parent), role, scenario, seed=seed) for m in members]
+    mixture = MixedPolicy(role, policies, [m.name for m in members], [m.weight for m in members])
+    mixture.identity = f"nash:{file_digest(path)}"  # what a tournament's cache knows it by: the mixture's content
+    return mixture

@@ -1,0 +1,105 @@
+"""The meta-game of a zoo: the Nash equilibrium of its capture matrix, exploitability within it, and its mixture as
+a player (``pecli tournament --nash``, ``nash:FOLDER``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.errors import PolicyError
+from pecli.metagame import maximin, nash_conv, solve
+from pecli.policies import resolve_policy
+from pecli.scenario import Scenario
+
+runner = CliRunner()
+
+
+def test_a_symmetric_cycle_is_solved_by_the_uniform_mixture() -> None:
+    # each pursuer catches one evader surely and another never: rock-paper-scissors in capture rates
+    m = np.array([[0.5, 1.0, 0.0], [0.0, 0.5, 1.0], [1.0, 0.0, 0.5]])
+    game = solve(["a", "b", "c"], ["x", "y", "z"], m)
+    assert game.value == pytest.approx(0.5)
+    np.testing.assert_allclose(game.pursuer_mixture, [1 / 3] * 3, atol=1e-7)
+    np.testing.assert_allclose(game.evader_mixture, [1 / 3] * 3, atol=1e-7)
+    assert nash_conv(m, game.pursuer_mixture, game.evader_mixture) == pytest.approx(0.0, abs=1e-7)
+    assert all(value == pytest.approx(0.5) for value in game.exploitability().values())  # each pure one loses 0.5
+
+
+def test_a_dominated_player_gets_no_weight_and_the_value_is_a_saddle_point() -> None:
+    m = np.array([[0.9, 0.6], [0.4, 0.3]])  # pursuer a dominates b; evader y dominates x
+    game = solve(["a", "b"], ["x", "y"], m)
+    assert game.value == pytest.approx(0.6)
+    assert game.support("pursuer") == {"a": pytest.approx(1.0)} and game.support("evader") == {"y": pytest.approx(1.0)}
+    assert game.exploitability() == pytest.approx({"a": 0.0, "b": 0.3, "x": 0.3, "y": 0.0})
+
+
+def test_the_equilibrium_guarantees_the_value_against_every_reply() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        m = rng.uniform(size=(int(rng.integers(1, 7)), int(rng.integers(1, 7))))
+        game = solve([f"p{i}" for i in range(m.shape[0])], [f"e{j}" for j in range(m.shape[1])], m)
+        assert (game.pursuer_mixture @ m).min() >= game.value - 1e-7  # no evader holds the mixture below v
+        assert (m @ game.evader_mixture).max() <= game.value + 1e-7  # no pursuer beats the evaders' mixture
+        assert game.pursuer_mixture.sum() == pytest.approx(1.0) and game.pursuer_mixture.min() >= 0
+
+
+@pytest.mark.parametrize("bad", [np.zeros((0, 2)), np.array([[0.5, np.nan]]), np.array([[1.5]]), np.ones(3)])
+def test_what_is_no_capture_matrix_is_refused(bad: np.ndarray) -> None:
+    with pytest.raises(ValueError):
+        maximin(bad)
+
+
+def _tournament(tmp_path: Path) -> Path:
+    out = tmp_path / "t"
+    result = runner.invoke(app, ["tournament", "pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter",
+                                 "-c", "quick", "-n", "60", "--seeds", "1", "-w", "1", "--out", str(out), "--nash"])
+    assert result.exit_code == 0, result.output
+    assert "Nash equilibrium" in result.stdout and f"nash:{out}" in result.output
+    return out
+
+
+def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(tmp_path: Path, quick: Scenario) -> None:
+    out = _tournament(tmp_path)
+    record = json.loads((out / "nash.json").read_text())
+    weights = {m["name"]: m["weight"] for m in record["pursuer"]}
+    assert set(weights) <= {"pure-pursuit", "interceptor"} and sum(weights.values()) == pytest.approx(1.0)
+    assert set(record["exploitability"]) == {"pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter"}
+    mixture = resolve_policy(f"nash:{out}", "evader", quick, seed=0)
+    assert sorted(mixture.names) == sorted(m["name"] for m in record["evader"])
+    played = runner.invoke(app, ["play", "-p", f"nash:{out}", "-e", f"nash:{out}/nash.json", "-c", "quick", "-n", "40",
+                                 "--json"])
+    assert played.exit_code == 0, played.output
+    again = runner.invoke(app, ["tournament", f"nash:{out}", "greedy", "-c", "quick", "-n", "40", "--seeds", "1",
+                                "-w", "1", "--out", str(tmp_path / "t2")])
+    assert again.exit_code == 0, again.output  # the mixture takes part in a tournament like any player
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: {**r, "scenario_hash": "x"}, "not 'quick'"),
+    (lambda r: {**r, "pursuer": [{"name": "m", "spec": "os:system", "weight": 1.0}]}, "imports no code"),
+    (lambda r: {**r, "pursuer": [{"name": "m", "spec": "nash:elsewhere", "weight": 1.0}]}, "does not nest"),
+    (lambda r: {**r, "value": float("nan")}, "not a Nash mixture"),
+    (lambda r: {**r, "pursuer": []}, "not a Nash mixture"),
+    (lambda r: json.loads("[" * 100_000 + "]" * 100_000), "nested too deep"),
+])
+def test_a_bad_mixture_file_is_refused_in_one_line(tmp_path: Path, quick: Scenario, change, message: str) -> None:
+    out = _tournament(tmp_path) if not (tmp_path / "t").exists() else tmp_path / "t"
+    record = json.loads((out / "nash.json").read_text())
+    try:
+        changed = json.dumps(change(record))
+    except RecursionError:
+        changed = "[" * 100_000 + "]" * 100_000
+    (out / "nash.json").write_text(changed)
+    with pytest.raises(PolicyError, match=message):
+        resolve_policy(f"nash:{out}", "pursuer", quick, seed=0)
+
+
+def test_nash_refuses_a_sampled_tournament(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "--sample", "1", "--nash",
+                                 "--out", str(tmp_path)])
+    assert result.exit_code == 1 and "--nash needs every pairing" in result.output

@@ -77,4 +77,4 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
         raise PecliError(f"{path}: no {what} there") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         reason = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
-        raise PecliError(f"{path}: not a readable {what} ({reason})") from None
+        raise PecliError(f"{path}: damaged {what} ({reason})") from None

@@ -15,7 +15,9 @@ Where ``fcntl`` is missing (Windows) locking is skipped. Network file systems ma
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -38,8 +40,11 @@ class FolderLocked(PecliError):
 
 def holder(folder: Path) -> int | None:
     """The PID recorded by the process that holds (or last held) ``folder``'s lock, if readable."""
+    path = folder / LOCK_FILE
     try:
-        return int((folder / LOCK_FILE).read_text().strip())
+        if path.is_symlink() or path.stat().st_size > 64:
+            return None
+        return int(path.read_text().strip())
     except (OSError, ValueError):
         return None
 
@@ -56,7 +61,16 @@ def acquire(folder: str | Path, what: str) -> None:
     if fcntl is None:
         _held[key] = [-1, 1]
         return
-    fd = os.open(key / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)  # not inherited by child processes
+    try:  # never through a link: a lock file linked elsewhere would empty that file
+        fd = os.open(key / LOCK_FILE, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise PecliError(f"{key / LOCK_FILE} is a symbolic link: pecli writes no lock through a link "
+                             "(delete it)") from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise PecliError(f"{key / LOCK_FILE} is not a regular file: delete it")
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -31,6 +31,9 @@ FORMAT = "pecli-onnx/1"
 SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
 
 
+MAX_SIDECAR_BYTES = 1 << 20
+
+
 def sidecar_path(model: str | Path) -> Path:
     """The sidecar of an exported model: ``final.onnx`` → ``final.onnx.json``."""
     model = Path(model)
@@ -51,10 +54,14 @@ def read_sidecar(model: str | Path) -> dict[str, Any]:
     path = sidecar_path(model)
     if not path.is_file():
         raise ExportError(f"{model}: no sidecar {path.name} beside it (export writes both; copy them together)")
-    try:
+    try:  # read as data, bounded: this module stands alone on a robot (NumPy and onnxruntime only)
+        if path.stat().st_size > MAX_SIDECAR_BYTES:
+            raise ValueError(f"{path.stat().st_size:,} bytes, more than a sidecar can be")
         data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, OSError, ValueError) as exc:
         raise ExportError(f"{path}: damaged sidecar ({exc})") from None
+    except RecursionError:
+        raise ExportError(f"{path}: damaged sidecar (nested too deep)") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         found = data.get("format") if isinstance(data, dict) else None
         raise ExportError(f"{path}: not a pecli sidecar of format {FORMAT} (found {found!r})")

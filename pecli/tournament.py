@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import random
 import signal
@@ -33,7 +34,7 @@ import numpy as np
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json, file_digest
+from pecli.io import atomic_write_json, file_digest, read_json
 from pecli.locks import locked
 from pecli.match import play_match
 from pecli.policies import resolve_policy
@@ -317,10 +318,17 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     if not path.is_file():
         return None
     try:
-        data = json.loads(path.read_text())
-        return PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
-    except (json.JSONDecodeError, TypeError, OSError):
+        data = read_json(path, "cached pairing", max_bytes=1 << 16)
+        result = PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
+    except (PecliError, TypeError):
         return None
+    numbers = (result.episodes, result.captures, result.time_to_capture_mean, result.time_to_capture_std)
+    if not all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in numbers) \
+            or not isinstance(result.episodes, int) or not isinstance(result.captures, int) \
+            or not 0 <= result.captures <= result.episodes or result.episodes < 1 \
+            or not 0 <= result.time_to_capture_mean <= 1 or not 0 <= result.time_to_capture_std <= 1:
+        return None  # not what a pairing can give: played again
+    return result
 
 
 def _one_torch_thread() -> None:

@@ -15,9 +15,21 @@ from pecli.errors import PecliError
 TRUST_VARIABLE = "PECLI_TRUST"
 
 
+YES = ("1", "true", "yes")
+NO = ("", "0", "false", "no")
+
+
 def trusted() -> bool:
-    """Whether unpickling is allowed in this process."""
-    return os.environ.get(TRUST_VARIABLE, "").strip().lower() not in ("", "0", "false", "no")
+    """Whether unpickling (and importing code a file names) is allowed in this process: ``PECLI_TRUST`` is
+    exactly one of ``1``, ``true``, ``yes`` (any case); unset or ``0``, ``false``, ``no`` is no, and anything else
+    is refused in one line rather than guessed (``off`` must not mean yes)."""
+    value = os.environ.get(TRUST_VARIABLE, "").strip().lower()
+    if value in YES:
+        return True
+    if value in NO:
+        return False
+    raise PecliError(f"{TRUST_VARIABLE}={os.environ[TRUST_VARIABLE]!r}: set it to 1, true or yes to trust files "
+                     "that need unpickling, or leave it unset (0, false or no)")
 
 
 class UntrustedFileError(PecliError):

@@ -22,7 +22,7 @@ until it closes the run or ends.
 
 from __future__ import annotations
 
-import json
+import math
 import os
 import platform
 import re
@@ -34,13 +34,14 @@ import weakref
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_path, atomic_write_json, atomic_write_text
+from pecli.io import atomic_path, atomic_write_json, atomic_write_text, read_json
 from pecli.locks import acquire, release
 from pecli.roles import Role
 from pecli.scenario import Scenario, scenario_from_dict
@@ -49,6 +50,7 @@ FINAL = "final"
 LAST = "last"
 BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
 JOB_FILE = "run.json"
+MAX_METADATA_BYTES = 16 << 20  # a checkpoint's .json: its opponents' records make it grow with a self-play pool
 RESUME_DIR = "resume"  # per role: the learner's durable state (pecli.rl.durable)
 
 
@@ -122,11 +124,14 @@ def read_metadata(checkpoint: str | Path) -> CheckpointMeta:
     if not path.is_file():
         raise ZooError(f"{checkpoint}: no metadata file {path.name} beside it (is this a pecli checkpoint?)")
     try:
-        data = json.loads(path.read_text())
+        data = read_json(path, "metadata", max_bytes=MAX_METADATA_BYTES)
+    except PecliError as exc:
+        raise ZooError(str(exc)) from None
+    try:
         if not isinstance(data, dict):
             raise TypeError("not a JSON object")
         return CheckpointMeta.from_dict(data)
-    except (json.JSONDecodeError, TypeError, ValueError, OSError) as exc:
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise ZooError(f"{path}: damaged metadata ({exc})") from None
 
 
@@ -257,11 +262,14 @@ class Run:
 
     def scenario(self) -> Scenario:
         """The resolved scenario the run was started with."""
+        from pecli.errors import ConfigError
+        from pecli.scenario import read_yaml
+
         source = self.path / "config.yaml"
         try:
-            data = yaml.safe_load(source.read_text())
-        except (yaml.YAMLError, OSError) as exc:
-            raise ZooError(f"{source}: damaged run config ({exc.__class__.__name__})") from None
+            data = read_yaml(source)
+        except ConfigError as exc:
+            raise ZooError(f"damaged run config: {exc}") from None
         return scenario_from_dict(data, source=str(source))
 
     def write_config(self, scenario: Scenario) -> None:
@@ -317,12 +325,28 @@ class Run:
         if not path.is_file():
             return None
         try:
-            data = json.loads(path.read_text())
-        except (json.JSONDecodeError, OSError) as exc:
-            raise ZooError(f"{path}: damaged ({exc})") from None
+            data = read_json(path, "run record", max_bytes=1 << 20)
+        except PecliError as exc:
+            raise ZooError(str(exc)) from None
         if not isinstance(data, dict):
             raise ZooError(f"{path}: damaged (not a JSON object)")
+        try:
+            JobRecord.model_validate(data)
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            raise ZooError(f"{path}: damaged ({'.'.join(map(str, first['loc'])) or 'record'}: {first['msg']})") from None
         return data
+
+
+class JobRecord(BaseModel):
+    """What ``run.json`` must hold to be read: the command, and for ``pecli train`` the role, opponent and seed."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+
+    command: str = Field(max_length=100)
+    role: Literal["pursuer", "evader"] | None = None
+    opponent: str | None = Field(default=None, max_length=4096)
+    seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
 
 
 @dataclass
@@ -357,6 +381,10 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
     return entries
 
 
+def _finite(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
     """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
 
@@ -366,16 +394,17 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
     """
     for results in sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime, reverse=True):
         try:
-            data = json.loads(results.read_text())
+            data = read_json(results, "tournament's results")
             ratings = data["ratings"] if isinstance(data, dict) else None
-        except (json.JSONDecodeError, OSError, KeyError):
+        except (PecliError, KeyError):
             continue
         if not isinstance(ratings, list):
             continue
         found = {}
         for rating in ratings:
-            if not isinstance(rating, dict) or not rating.get("spec"):
-                continue
+            if not isinstance(rating, dict) or not isinstance(rating.get("spec"), str) or not rating["spec"] \
+                    or not all(_finite(rating.get(key)) for key in ("elo", "stderr")):
+                continue  # not what a tournament writes: a rating of NaN never ranks a checkpoint
             spec = Path(rating["spec"])
             if spec.suffix == ".zip":
                 path = spec if spec.is_absolute() else results.parent / spec

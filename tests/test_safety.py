@@ -6,6 +6,8 @@ import base64
 import json
 import pickle
 import shutil
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -170,3 +172,147 @@ def test_a_payload_in_the_durable_state_is_refused(tmp_path: Path) -> None:
                                  "--steps", "400"])
     assert result.exit_code == 1 and "buffer files hold pickled objects" in result.output
     assert not marker.exists()
+
+
+TINY = ["--set", "buffer_size=400", "--set", "batch_size=16", "--set", "learning_starts=50", "--set",
+        "net_arch=[16,16]", "--set", "n_envs=2", "--set", "checkpoint_every=2"]
+
+
+@pytest.fixture
+def stopped(tmp_path: Path) -> Path:
+    """A tiny train run ``r`` in ``tmp_path`` with a durable state, as a stranger's zoo would hold it."""
+    start = ["train", "pursuer", "-c", "quick", "--steps", "300", "--name", "r", "--zoo", str(tmp_path), "-q", *TINY]
+    assert runner.invoke(app, start).exit_code == 0
+    return tmp_path / "r"
+
+
+def resume(run: Path, *extra: str):
+    return runner.invoke(app, ["train", "pursuer", "--name", run.name, "--zoo", str(run.parent), "--resume", "-q",
+                               "--steps", "400", *extra])
+
+
+@pytest.mark.parametrize("value, allowed", [("off", None), ("n", None), ("none", None), ("maybe", None), ("0", False),
+                                            ("no", False), ("FALSE", False), ("", False), ("1", True), ("Yes", True)])
+def test_pecli_trust_takes_exactly_yes_or_no(monkeypatch, value: str, allowed: bool | None) -> None:
+    from pecli.errors import PecliError
+    from pecli.trust import trusted
+
+    monkeypatch.setenv("PECLI_TRUST", value)
+    if allowed is None:
+        with pytest.raises(PecliError, match="set it to 1, true or yes"):
+            trusted()
+    else:
+        assert trusted() is allowed
+
+
+def test_a_run_record_that_names_code_imports_nothing(stopped: Path, monkeypatch) -> None:
+    marker = stopped.parent / "ran"
+    (stopped.parent / "evil.py").write_text(f"from pathlib import Path\nPath({str(marker)!r}).touch()\n"
+                                            "class Evader: pass\n")
+    monkeypatch.syspath_prepend(str(stopped.parent))  # as `python -m pecli` puts the working folder on the path
+    record = json.loads((stopped / "run.json").read_text())
+    (stopped / "run.json").write_text(json.dumps({**record, "opponent": "evil:Evader"}))
+    result = resume(stopped)
+    assert result.exit_code == 1 and "imports no code a file names" in result.output
+    assert not marker.exists()
+    (stopped / "run.json").write_text(json.dumps({**record, "opponent": "/elsewhere/evader/final.zip"}))
+    result = resume(stopped)
+    assert result.exit_code == 1 and "outside" in result.output and "--opponent" in result.output
+    (stopped / "run.json").write_text(json.dumps({**record, "seed": "zero"}))
+    result = resume(stopped)
+    assert result.exit_code == 1 and "run.json: damaged" in result.output
+
+
+def test_a_durable_state_naming_a_file_outside_its_folder_is_refused(stopped: Path) -> None:
+    state = stopped / "pursuer" / "resume" / "state.json"
+    record = json.loads(state.read_text())
+    outside = stopped.parent / "secret.zip"
+    outside.write_bytes((stopped / "pursuer" / "resume" / record["model"]).read_bytes())
+    for name in ("../../../secret.zip", str(outside)):
+        state.write_text(json.dumps({**record, "model": name}))
+        result = resume(stopped)
+        assert result.exit_code == 1 and "not a file of" in result.output, result.output
+    link = stopped / "pursuer" / "resume" / "linked.zip"
+    link.symlink_to(outside)
+    state.write_text(json.dumps({**record, "model": link.name}))
+    result = resume(stopped)
+    assert result.exit_code == 1 and "names files that are gone" in result.output
+
+
+def test_a_lock_file_linked_elsewhere_is_not_written_through(stopped: Path) -> None:
+    victim = stopped.parent / "victim.txt"
+    victim.write_text("keep me\n")
+    lock = stopped / ".pecli.lock"
+    lock.unlink(missing_ok=True)
+    lock.symlink_to(victim)
+    result = subprocess.run([sys.executable, "-m", "pecli", "train", "pursuer", "--name", "r", "--zoo",
+                             str(stopped.parent), "--resume", "-q", "--steps", "400"], capture_output=True, text=True)
+    assert result.returncode == 1 and "symbolic link" in result.stderr, result.stderr
+    assert victim.read_text() == "keep me\n"
+
+
+def test_a_selfplay_pool_entry_that_names_code_imports_nothing(quick: Scenario, tmp_path: Path) -> None:
+    from pecli.errors import PolicyError
+    from pecli.rl.selfplay import SelfPlay, SelfPlayJob
+
+    scenario = with_overrides(quick, {"buffer_size": 400, "batch_size": 16, "learning_starts": 50,
+                                      "net_arch": [16, 16], "n_envs": 2, "selfplay.rounds": 1,
+                                      "selfplay.steps_per_round": 60})
+    SelfPlay(SelfPlayJob(scenario, tmp_path, "sp", progress=False)).run()
+    state_path = tmp_path / "sp" / "selfplay.json"
+    state = json.loads(state_path.read_text())
+    state["pools"]["evader"]["entries"][0]["spec"] = "os:system"
+    state_path.write_text(json.dumps(state))
+    play = SelfPlay(SelfPlayJob(scenario, tmp_path, "sp", resume=True, progress=False))
+    with pytest.raises(PolicyError, match="imports no code"):
+        play._policy("evader", "os:system")
+    with pytest.raises(PolicyError, match="outside"):
+        play._policy("evader", "../../elsewhere.zip")
+
+
+DEEP = "[" * 100_000 + "]" * 100_000
+
+
+def test_deeply_nested_records_are_one_clear_line(stopped: Path, tmp_path: Path) -> None:
+    """Every JSON record pecli reads back from a run: too deep to parse is 'damaged', never a RecursionError."""
+    from pecli.errors import PecliError
+    from pecli.rl.durable import DurableState
+    from pecli.zoo import Run, read_metadata
+
+    final = stopped / "pursuer" / "final.json"
+    final.write_text(DEEP)
+    with pytest.raises(PecliError, match="damaged metadata"):
+        read_metadata(stopped / "pursuer" / "final.zip")
+    (stopped / "run.json").write_text(DEEP)
+    with pytest.raises(PecliError, match="damaged run record"):
+        Run(stopped).job()
+    (stopped / "pursuer" / "resume" / "state.json").write_text(DEEP)
+    with pytest.raises(PecliError, match="damaged resume state"):
+        DurableState(stopped / "pursuer" / "resume").read()
+    (stopped / "config.yaml").write_text("a: " + "[" * 20_000 + "]" * 20_000 + "\n")
+    with pytest.raises(PecliError, match="nested too deeply"):
+        Run(stopped).scenario()
+    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--set", "gamma=" + "[" * 20_000 + "]" * 20_000,
+                                 "--zoo", str(tmp_path / "z")])
+    assert result.exit_code == 1 and "nested too deeply" in result.output
+
+
+def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Scenario) -> None:
+    """A pairing cache with impossible numbers is played again; a rating of NaN never ranks a checkpoint."""
+    from pecli.zoo import tournament_ratings
+
+    out = tmp_path / "t"
+    args = ["tournament", "--baselines", "-c", "quick", "-n", "20", "--seeds", "1", "-w", "1", "--out", str(out),
+            "--json"]
+    first = json.loads(runner.invoke(app, args).stdout)
+    for cache in (out / "pairings").glob("*.json"):
+        cache.write_text(json.dumps({"pursuer": "x", "evader": "y", "episodes": 0, "captures": 5,
+                                     "time_to_capture_mean": float("nan"), "time_to_capture_std": 1e9}))
+    again = runner.invoke(app, [*args, "--resume"])
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.stdout)["pairings"] == first["pairings"]  # played again, the same games
+    results = out / "results.json"
+    data = json.loads(results.read_text())
+    data["ratings"][0]["elo"] = float("nan")
+    results.write_text(json.dumps(data))
+    assert len(tournament_ratings(tmp_path)) == len(data["ratings"]) - 1

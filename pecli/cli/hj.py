@@ -13,6 +13,7 @@ from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
 from pecli.errors import PecliError
+from pecli.io import read_json
 
 app = typer.Typer(
     help="Hamilton–Jacobi baseline: solve the point-mass game, inspect solutions, print Table II.",
@@ -175,10 +176,7 @@ def table(
     from pecli.reports import paper_table_two, table_two
 
     path = results / "results.json" if results.is_dir() else results
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise PecliError(f"{path}: not a tournament's results.json ({exc})") from None
+    data = read_json(path, "tournament's results.json")
     if not isinstance(data, dict) or not data.get("pairings"):
         raise PecliError(f"{path}: not a tournament's results.json (no pairings)")
     console.print(table_two(data))

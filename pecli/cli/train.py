@@ -71,7 +71,8 @@ def train(
         with_overrides,
     )
     from pecli.rl.train import train as run_training
-    from pecli.zoo import Run
+    from pecli.policies.registry import recorded_policy
+    from pecli.zoo import JOB_FILE, Run
 
     role_name = role.value
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
@@ -92,6 +93,8 @@ def train(
         if kept is None or kept.get("command") != "train":
             what = "an older pecli's run (no run.json)" if kept is None else f"a {kept.get('command')} run"
             raise PecliError(f"run '{name}' is {what}: `pecli train --resume` cannot continue it")
+        if any(kept.get(key) is None for key in ("role", "opponent", "seed")):
+            raise PecliError(f"{run.path / JOB_FILE}: damaged (a train run records its role, opponent and seed)")
         if kept["role"] != role_name:
             raise PecliError(f"run '{name}' trains the {kept['role']}, not the {role_name}")
         for option, given, value in (("--opponent", opponent, kept["opponent"]), ("--seed", seed, kept["seed"])):
@@ -102,7 +105,9 @@ def train(
         changed = sorted(set(settings) - {"steps"} - unchanged)
         if changed:
             raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
-        opponent, seed, curriculum_steps = kept["opponent"], kept["seed"], t.steps
+        if opponent is None:  # the record's, checked: a run folder from elsewhere names no code or path to follow
+            opponent = recorded_policy(kept["opponent"], zoo, f"{run.path / JOB_FILE}")
+        seed, curriculum_steps = kept["seed"], t.steps
     else:
         scenario = load_scenario(config or "paper")
     if settings:

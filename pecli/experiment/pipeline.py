@@ -20,7 +20,6 @@ are not played again.
 
 from __future__ import annotations
 
-import json
 import os
 import socket
 import time
@@ -34,7 +33,7 @@ import yaml
 from pecli.errors import PecliError
 from pecli.experiment.runs import RunProgress, averages_behind, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
-from pecli.io import atomic_write_json, atomic_write_text
+from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.roles import ROLES
 from pecli.scenario import Training, dotted, read_yaml
 
@@ -89,10 +88,7 @@ def read_state(out: Path) -> dict[str, Any]:
     path = out / STATE_FILE
     if not path.is_file():
         return {}
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise PecliError(f"{path}: damaged ({type(exc).__name__})") from None
+    data = read_json(path, "experiment record")
     return data if isinstance(data, dict) else {}
 
 
@@ -156,8 +152,8 @@ def statuses(experiment: LoadedExperiment, out: Path) -> list[RunStatus]:
 
 def _read_marker(out: Path, run: RunSpec) -> dict[str, Any]:
     try:
-        data = json.loads((out / "tasks" / f"{run.name}.json").read_text())
-    except (OSError, ValueError):
+        data = read_json(out / "tasks" / f"{run.name}.json", "task record")
+    except PecliError:
         return {}
     return data if isinstance(data, dict) else {}
 

@@ -9,7 +9,6 @@ the paper's bold. A cell played over fewer episodes than the paper's 1500 says s
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 from pecli.errors import PecliError
 from pecli.experiment.pipeline import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
-from pecli.io import atomic_write_json, atomic_write_text
+from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role
@@ -83,13 +82,13 @@ class ExperimentReport:
         self.experiment: LoadedExperiment = open_experiment(out)
         self.table = self.experiment.spec.report.table
         try:
-            self.data = json.loads((out / "tournament" / "results.json").read_text())
-            kept = json.loads((out / KEPT_FILE).read_text())
+            if not (out / "tournament" / "results.json").is_file() or not (out / KEPT_FILE).is_file():
+                raise FileNotFoundError
+            self.data = read_json(out / "tournament" / "results.json", "tournament's results")
+            kept = read_json(out / KEPT_FILE, "record of kept checkpoints")
         except FileNotFoundError:
             raise PecliError(f"{out}: the experiment has not reached its tournament yet "
                              "(`pecli experiment status` says how far it got)") from None
-        except (OSError, ValueError) as exc:
-            raise PecliError(f"{out}: damaged results ({type(exc).__name__}: {exc})") from None
         if not (isinstance(self.data, dict) and isinstance(kept, dict)
                 and all(key in self.data for key in ("pairings", "ratings", "episodes_per_seed", "seeds"))):
             raise PecliError(f"{out}: damaged results (tournament/results.json or {KEPT_FILE} is not what "

@@ -10,7 +10,6 @@ retried task does.
 
 from __future__ import annotations
 
-import json
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -18,7 +17,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from pecli.errors import PecliError
 from pecli.experiment.spec import RunSpec
+from pecli.io import read_json
 from pecli.rl.budget import budget_reached, whole_rounds
 from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE, stale_averages
 from pecli.zoo import FINAL, RESUME_DIR, Run
@@ -43,8 +44,8 @@ class RunProgress:
 
 def _read_json(path: Path) -> dict[str, Any] | None:
     try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
+        data = read_json(path, "record")
+    except PecliError:
         return None
     return data if isinstance(data, dict) else None
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -118,6 +119,31 @@ def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None =
         f"unknown policy '{spec}' for {role}: use one of {', '.join(builtin_names(role) + sorted(_FAMILIES))}, "
         "a file, or module:Class"
     )
+
+
+def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
+    """A policy string that a file records (``run.json``, ``selfplay.json``, a study), checked before anything
+    resolves it: a zoo from a stranger is data. Built-in names and families play; a policy file only when it lies
+    inside ``inside`` (links resolved; ``None``: anywhere, read as data); ``module:Class``, which imports code, only
+    with ``--trust``. Anything else is :class:`PolicyError` naming ``source`` and what to do instead."""
+    from pecli.trust import trusted
+
+    spec = spec.strip()
+    if spec in BUILTINS or family_of(spec) is not None:
+        return spec
+    path = Path(spec)
+    if path.suffix.lower() in _LOADERS:
+        if inside is None:
+            return spec
+        real, room = Path(os.path.realpath(path)), Path(os.path.realpath(inside))
+        if real == room or room in real.parents:
+            return spec
+        raise PolicyError(f"{source} names the policy file {spec}, outside {inside}: pecli follows no path a record "
+                          "names out of its folder; name the opponent yourself (--opponent) to use it")
+    if ":" in spec and trusted():
+        return spec
+    raise PolicyError(f"{source} names the policy '{spec}', neither a built-in nor a policy file: pecli imports "
+                      "no code a file names unless you pass `pecli --trust`")
 
 
 def stored_scenario(spec: str) -> Scenario | None:

@@ -24,7 +24,6 @@ see :func:`pecli.rl.train.resume_seed`), so the partial episodes of the interval
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,8 @@ from typing import Any
 import numpy as np
 import torch as th
 
-from pecli.io import atomic_path, atomic_write_json
+from pecli.errors import PecliError
+from pecli.io import atomic_path, atomic_write_json, read_json
 from pecli.rl.buffers import end_episodes
 from pecli.trust import untrusted
 from pecli.zoo import ZooError
@@ -95,6 +95,11 @@ class Record:
             raise ValueError(f"format {data.get('format')!r}, this pecli reads {FORMAT}")
         rings = {key: Ring.from_dict(data[key]) if data.get(key) else None for key in ("replay", "belief")}
         return cls(**{**data, **rings})
+
+
+def _own_file_name(name: object) -> bool:
+    """Whether ``name`` is a plain file name, as a commit writes them: no folder, no way up, no hidden file."""
+    return isinstance(name, str) and bool(name) and name == Path(name).name and not name.startswith(".")
 
 
 # -- ring buffers as arrays ---------------------------------------------------------------------------
@@ -174,10 +179,18 @@ class DurableState:
         if not path.is_file():
             return None
         try:
-            record = Record.from_dict(json.loads(path.read_text()))
-        except (json.JSONDecodeError, OSError, KeyError, TypeError, ValueError) as exc:
+            data = read_json(path, "resume state")
+        except PecliError as exc:
+            raise ZooError(str(exc)) from None
+        try:
+            record = Record.from_dict(data)
+        except (AttributeError, KeyError, TypeError, ValueError) as exc:
             raise ZooError(f"{path}: damaged resume state ({type(exc).__name__}: {exc})") from None
-        missing = sorted(name for name in record.files() if not (self.directory / name).is_file())
+        strays = sorted(name for name in record.files() if not _own_file_name(name))
+        if strays:  # a record from elsewhere must not lead pecli out of this folder
+            raise ZooError(f"{path}: damaged resume state (names {strays[0]!r}, not a file of {self.directory})")
+        missing = sorted(name for name in record.files()
+                         if (self.directory / name).is_symlink() or not (self.directory / name).is_file())
         if missing:
             raise ZooError(f"{path} names files that are gone ({', '.join(missing)})")
         return record

@@ -104,6 +104,8 @@ def load_space(path: str | Path | None, scenario: Scenario) -> tuple[SearchSpace
         raise PecliError(f"cannot read the search space {path}: {exc.strerror or exc}") from None
     except yaml.YAMLError as exc:
         raise PecliError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+    except RecursionError:
+        raise PecliError(f"{path}: nested too deeply to be read") from None
     space = parse_space(data, str(path))
     space.check(scenario, str(path))
     return space, text

@@ -27,7 +27,6 @@ learner's newest commit: at most one checkpoint interval is lost.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
@@ -40,13 +39,13 @@ import torch as th
 from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json
+from pecli.io import atomic_write_json, read_json
 from pecli.match import play_match
 from pecli.metagame import solve
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
-from pecli.policies.registry import builtin_names
+from pecli.policies.registry import builtin_names, recorded_policy
 from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints
 from pecli.rl.buffers import end_episodes
@@ -171,9 +170,10 @@ def read_state(run: Run) -> SelfPlayState:
     path = run.path / STATE_FILE
     if not path.is_file():
         raise PecliError(f"run '{run.name}' is not a self-play run (no {STATE_FILE}): resume it with `pecli train`")
+    data = read_json(path, "self-play state")
     try:
-        return SelfPlayState.from_dict(json.loads(path.read_text()))
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        return SelfPlayState.from_dict(data)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise PecliError(f"{path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
 
 
@@ -296,10 +296,14 @@ class SelfPlay:
         """The frozen policy of a pool entry, loaded once per process."""
         key = (role, spec)
         if key not in self._policies:
-            path = self.run_dir.path / spec
-            target = str(path) if spec.endswith(".zip") else spec
-            self._policies[key] = resolve_policy(target, role, self.scenario, seed=self.job.seed)
+            self._policies[key] = resolve_policy(self._entry_spec(spec), role, self.scenario, seed=self.job.seed)
         return self._policies[key]
+
+    def _entry_spec(self, spec: str) -> str:
+        """The policy string of a pool entry of ``selfplay.json``: a checkpoint inside the run (run-relative) or a
+        built-in, checked (:func:`~pecli.policies.registry.recorded_policy`): a run from elsewhere is data."""
+        target = str(self.run_dir.path / spec) if spec.endswith(".zip") else spec
+        return recorded_policy(target, self.run_dir.path, f"{self.run_dir.path / STATE_FILE}")
 
     def _mixed(self, role: Role) -> MixedPolicy:
         pool = self.state.pools[role]
@@ -343,9 +347,7 @@ class SelfPlay:
 
             def player(role: Role, spec: str) -> Policy:
                 if (role, spec) not in loaded:
-                    path = self.run_dir.path / spec
-                    loaded[role, spec] = resolve_policy(str(path) if spec.endswith(".zip") else spec, role,
-                                                        self.scenario, seed=self.job.seed)
+                    loaded[role, spec] = resolve_policy(self._entry_spec(spec), role, self.scenario, seed=self.job.seed)
                 return loaded[role, spec]
 
             for p, e in missing:

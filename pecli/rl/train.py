@@ -75,6 +75,8 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = yaml.safe_load(text)
         except yaml.YAMLError:
             value = text
+        except RecursionError:
+            raise PecliError(f"--set {key.strip()}: the value is nested too deeply") from None
         if isinstance(value, str):
             try:
                 number = float(value)

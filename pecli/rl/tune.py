@@ -38,7 +38,7 @@ from pecli.errors import PecliError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
-from pecli.policies.registry import builtin_names
+from pecli.policies.registry import builtin_names, recorded_policy
 from pecli.rl.callbacks import CurriculumCallback
 from pecli.rl.search_space import config_point, parse_space, suggest
 from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, with_overrides
@@ -148,7 +148,17 @@ def stored_settings(study: optuna.Study) -> TuneSettings:
     data = study.user_attrs.get("settings")
     if not isinstance(data, dict):
         raise PecliError(f"study '{study.study_name}' was not made by pecli tune (no settings)")
-    return TuneSettings(**data)
+    try:
+        settings = TuneSettings(**data)
+    except TypeError as exc:
+        raise PecliError(f"study '{study.study_name}': damaged settings ({exc})") from None
+    if not isinstance(settings.opponent, str | None) or not isinstance(settings.eval_opponents, list) or \
+            not all(isinstance(spec, str) for spec in settings.eval_opponents):
+        raise PecliError(f"study '{study.study_name}': damaged settings (opponents are not policy strings)")
+    for spec in [settings.opponent or "", *settings.eval_opponents]:  # the study's storage may come from elsewhere
+        if spec:
+            recorded_policy(spec, None, f"study '{study.study_name}'")
+    return settings
 
 
 def run_workers(worker: Worker, jobs: int) -> None:

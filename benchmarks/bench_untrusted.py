@@ -1,6 +1,6 @@
-"""Untrusted files through every loading path: does a planted payload ever run?
+"""Untrusted files through every loading path: does a planted payload ever run? Do hostile records?
 
-    python benchmarks/bench_untrusted.py [--out runs/bench_untrusted]
+    python benchmarks/bench_untrusted.py [--out runs/bench_untrusted] [--part all|payloads|records]
 
 Trains a tiny run, then plants a pickled payload (unpickling it creates a marker file) in one file at a
 time: a checkpoint's ``data`` entry (where SB3 keeps pickled objects), its ``policy.pth``, its
@@ -8,7 +8,10 @@ optimiser's ``.pth``, the durable state's model and replay-buffer arrays, and an
 checkpoint (no network description, which only unpickling can rebuild). Each is given to every
 command that reads it (``play``, ``tournament``, ``export onnx``, ``zoo list|show|best``,
 ``train --resume``), in a subprocess. Printed: per file and command, the exit code and whether the
-payload ran; then the totals (target: 0 payloads run; refusals are one line, exit 1).
+payload ran; then the totals (target: 0 payloads run; refusals are one line, exit 1). Then hostile records: a
+``run.json`` that names code beside it, ``PECLI_TRUST=off``, a lock file linked outside, a durable state naming a
+model outside its run, metadata that claims huge networks, records nested too deep, numbers of 5000 digits, markup
+in a path; each outcome counted by class (target: 0 payloads, 0 internal errors).
 """
 
 from __future__ import annotations
@@ -87,6 +90,8 @@ def plant_as_older_pecli(path: Path, marker: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/bench_untrusted"))
+    parser.add_argument("--part", choices=["all", "payloads", "records"], default="all",
+                        help="planted payloads, hostile records, or both")
     args = parser.parse_args()
     out = args.out.resolve()
     shutil.rmtree(out, ignore_errors=True)
@@ -110,6 +115,9 @@ def main() -> None:
                                "--steps", "1000"],
         }
 
+    if args.part == "records":
+        hostile_records(out, clean)
+        return
     cases = {
         "checkpoint: data entry": ("final", plant_in_data),
         "checkpoint: policy.pth": ("final", plant_in_entry("policy.pth")),
@@ -143,6 +151,93 @@ def main() -> None:
     for row in rows:
         print("| " + " | ".join(str(x) for x in row) + " |")
     print(f"\nloads tried: {len(rows)}, payloads run: {ran}, internal errors: {internal}")
+    if args.part == "all":
+        hostile_records(out, clean)
+
+
+def edit_json(path: Path, **changes: object) -> None:
+    path.write_text(json.dumps({**json.loads(path.read_text()), **changes}))
+
+
+def hostile_records(out: Path, clean: Path) -> None:
+    """Records that name code or paths, or claim sizes, each given to the command that reads it; every outcome
+    counted by class: refused (exit 1, an error line), accepted (exit 0), internal (any other exit), payload (code
+    ran, or a file outside the zoo changed)."""
+    deep = "[" * 100_000 + "]" * 100_000
+
+    def case(label: str, setup, command: list[str], env: dict[str, str] | None = None):
+        zoo = out / ("hostile-" + "".join(c if c.isalnum() else "-" for c in label))
+        shutil.copytree(clean, zoo)
+        run = zoo / "victim"
+        victim = out / f"victim-{zoo.name}.txt"
+        victim.write_text("keep\n")
+        marker = zoo / "PAYLOAD_RAN"
+        setup(zoo, run, marker, victim)
+        args = [arg.format(zoo=zoo, run=run) for arg in command]
+        result = subprocess.run([sys.executable, "-m", "pecli", *args], capture_output=True, text=True, cwd=zoo,
+                                env={**__import__("os").environ, **(env or {})})
+        payload = marker.exists() or victim.read_text() != "keep\n"
+        kind = "payload" if payload else "refused" if result.returncode == 1 else "accepted" \
+            if result.returncode == 0 else "internal"
+        lines = [line for line in (result.stderr + result.stdout).splitlines() if line.startswith("error")]
+        return label, kind, lines[0][:110] if lines else ""
+
+    final = "{run}/pursuer/final.zip"
+    resume = ["train", "pursuer", "--name", "victim", "--zoo", "{zoo}", "--resume", "-q", "--steps", "1000"]
+    play = ["play", "-p", final, "-e", "greedy", "-n", "4"]
+
+    def evil_module(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        (zoo / "evil.py").write_text(f"from pathlib import Path\nPath({str(marker)!r}).touch()\nclass E: pass\n")
+        edit_json(run / "run.json", opponent="evil:E")
+
+    def older_checkpoint(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        plant_as_older_pecli(run / "pursuer" / "final.zip", marker)
+
+    def linked_lock(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        (run / ".pecli.lock").unlink(missing_ok=True)
+        (run / ".pecli.lock").symlink_to(victim)
+
+    def model_outside(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        state = run / "pursuer" / "resume" / "state.json"
+        model = json.loads(state.read_text())["model"]
+        shutil.copy(run / "pursuer" / "resume" / model, out / "outside.zip")
+        edit_json(state, model=str(out / "outside.zip"))
+
+    def meta(**changes: object):
+        def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+            edit_json(run / "pursuer" / "final.json", **changes)
+        return setup
+
+    def text(relative: str, body: str):
+        def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+            (run / relative).write_text(body)
+        return setup
+
+    rows = [
+        case("run.json names evil:E beside it", evil_module, resume),
+        case("PECLI_TRUST=off, an older checkpoint", older_checkpoint, play, env={"PECLI_TRUST": "off"}),
+        case(".pecli.lock linked to a file outside", linked_lock, resume),
+        case("state.json model outside the run", model_outside, resume),
+        case("metadata net_arch [2147483648]", meta(policy_kwargs={"net_arch": [2147483648], "n_critics": 2}), play),
+        case("metadata n_critics 1000000", meta(policy_kwargs={"net_arch": [16, 16], "n_critics": 1_000_000}), play),
+        case("metadata 100000 layers", meta(policy_kwargs={"net_arch": [16] * 100_000, "n_critics": 2}), play),
+        case("metadata frame_stack 10**9", meta(frame_stack=10**9), play),
+        case("metadata nested 100000 deep", text("pursuer/final.json", deep), play),
+        case("run.json nested 100000 deep", text("run.json", deep), resume),
+        case("state.json nested 100000 deep", text("pursuer/resume/state.json", deep), resume),
+        case("config.yaml nested 20000 deep", text("config.yaml", "a: " + "[" * 20_000 + "]" * 20_000), resume),
+        case("--set rounds of 5000 digits", lambda *a: None,
+             ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000, "--zoo", "{zoo}/new"]),
+        case("--zoo with markup z[/x]", lambda *a: None,
+             ["train", "pursuer", "-c", "quick", "--steps", "100", "--zoo", "{zoo}/z[/x]", "-q",
+              "--set", "n_envs=2", "--set", "learning_starts=50", "--set", "buffer_size=200"]),
+    ]
+    counts = {kind: sum(row[1] == kind for row in rows) for kind in ("refused", "accepted", "internal", "payload")}
+    print("\n| hostile record | outcome | line |\n| --- | --- | --- |")
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+    print("\n" + ", ".join(f"{kind}: {n}" for kind, n in counts.items()) + " (the markup --zoo is accepted: it is a "
+          "valid folder name, printed as text)")
 
 
 if __name__ == "__main__":

@@ -75,6 +75,6 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
         return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise PecliError(f"{path}: no {what} there") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # ValueError: not JSON, or an integer of > 4300 digits
         reason = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
         raise PecliError(f"{path}: damaged {what} ({reason})") from None

@@ -52,6 +52,8 @@ def parse_angle(value: Any) -> Any:
         if m := _ANGLE.match(value):
             k = float(m["k"]) if m["k"] else 1.0
             d = float(m["d"]) if m["d"] else 1.0
+            if d == 0.0:
+                raise ValueError(f"cannot read {value!r} as an angle (it divides by zero)")
             return k * math.pi / d
         if m := _DEGREES.match(value):
             return math.radians(float(m["v"]))
@@ -84,6 +86,9 @@ MAX_HISTORY = 10_000  # game steps of the belief window (the paper: 200)
 MAX_BUFFER = 10**8  # transitions or pairs kept (the paper: 10^5)
 MAX_BATCH = 65_536
 MAX_WIDTH = 65_536  # units of one hidden layer or LSTM
+MAX_METRES = 1e6  # any length: arena, sensor range, car, capture radius (the paper's arena: 16 m)
+MAX_RATE = 1e5  # any speed, acceleration or steering rate, SI (the paper's car: 2.5 m/s, 2 m/s^2)
+MAX_DT = 10.0  # the game's time step, s (the paper: 0.1)
 MAX_DEPTH = 32  # hidden layers
 MAX_COUNT = 10**9  # any other count (episodes, intervals, threads, ...)
 MEMORY_LIMIT = 64 * 2**30  # bytes one training process may plan to allocate (memory_estimate)
@@ -96,7 +101,7 @@ class _Model(BaseModel):
 class Sensor(_Model):
     """A noise-free wedge sensor: the opponent is seen iff within ``range`` and ``fov``/2 of the heading."""
 
-    range: Real = Field(gt=0, description="sensing range V_r in m")
+    range: Real = Field(gt=0, le=MAX_METRES, description="sensing range V_r in m")
     fov: Angle = Field(default=TWO_PI, description="field-of-view angle V_alpha in rad, in (0, 2pi]")
 
     @field_validator("fov")
@@ -111,14 +116,14 @@ class CarAgent(_Model):
     """A kinematic single-track car (CommonRoad KS model); state (s_x, s_y, delta, v, psi)."""
 
     kind: Literal["car"] = "car"
-    lf: Real = Field(gt=0, description="centre of gravity to front axle, m")
-    lr: Real = Field(gt=0, description="centre of gravity to rear axle, m")
+    lf: Real = Field(gt=0, le=MAX_METRES, description="centre of gravity to front axle, m")
+    lr: Real = Field(gt=0, le=MAX_METRES, description="centre of gravity to rear axle, m")
     steer_min: Angle = Field(description="lowest steering angle delta, rad")
     steer_max: Angle = Field(description="highest steering angle delta, rad")
-    steer_rate_max: Real = Field(gt=0, description="steering velocity limit |v_delta|, rad/s")
-    v_min: Real = Field(description="lowest longitudinal velocity, m/s (negative: reverse)")
-    v_max: Real = Field(gt=0, description="highest longitudinal velocity, m/s")
-    a_max: Real = Field(gt=0, description="acceleration limit |a|, m/s^2")
+    steer_rate_max: Real = Field(gt=0, le=MAX_RATE, description="steering velocity limit |v_delta|, rad/s")
+    v_min: Real = Field(ge=-MAX_RATE, description="lowest longitudinal velocity, m/s (negative: reverse)")
+    v_max: Real = Field(gt=0, le=MAX_RATE, description="highest longitudinal velocity, m/s")
+    a_max: Real = Field(gt=0, le=MAX_RATE, description="acceleration limit |a|, m/s^2")
     v_switch: Real | None = Field(default=None, gt=0, description="above this speed a_max falls as 1/v; none: never")
     sensor: Sensor
 
@@ -150,8 +155,8 @@ class PointMassAgent(_Model):
     """A point mass (CommonRoad PM model); state (s_x, s_y, v_x, v_y), input (a_x, a_y)."""
 
     kind: Literal["point_mass"] = "point_mass"
-    v_max: Real = Field(gt=0, description="velocity limit per axis, m/s")
-    a_max: Real = Field(gt=0, description="acceleration limit per axis, m/s^2")
+    v_max: Real = Field(gt=0, le=MAX_RATE, description="velocity limit per axis, m/s")
+    a_max: Real = Field(gt=0, le=MAX_RATE, description="acceleration limit per axis, m/s^2")
     sensor: Sensor
 
     @field_validator("sensor")
@@ -173,8 +178,8 @@ Agent = Annotated[CarAgent | PointMassAgent, Field(discriminator="kind")]
 class Arena(_Model):
     """An obstacle-free rectangle centred at the origin."""
 
-    width: Real = Field(gt=0, description="extent along x, m")
-    height: Real = Field(gt=0, description="extent along y, m")
+    width: Real = Field(gt=0, le=MAX_METRES, description="extent along x, m")
+    height: Real = Field(gt=0, le=MAX_METRES, description="extent along y, m")
 
     @property
     def half(self) -> tuple[float, float]:
@@ -372,9 +377,9 @@ class Scenario(_Model):
     name: str = "custom"
     description: str = ""
     arena: Arena
-    dt: Real = Field(default=0.1, gt=0, description="time step, s")
+    dt: Real = Field(default=0.1, gt=0, le=MAX_DT, description="time step, s")
     horizon: Count = Field(default=400, ge=1, le=MAX_HORIZON, description="steps before a timeout (evader wins)")
-    capture_radius: Real = Field(default=0.25, gt=0, description="agent radius c; capture when d <= 2c")
+    capture_radius: Real = Field(default=0.25, gt=0, le=MAX_METRES, description="agent radius c; capture when d <= 2c")
     observation_frame: Literal["own", "world"] = Field(
         default="own",
         description="'own': the opponent relative to the observer, rotated into its body frame; 'world': the paper's",
@@ -624,6 +629,8 @@ def read_yaml(path: Path) -> Any:
         raise ConfigError(f"{path}: nested too deeply to be read") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
+    except ValueError as exc:  # an integer of more digits than Python converts (4300)
+        raise ConfigError(f"{path}: {exc}") from None
 
 
 def load_scenario(path_or_name: str | Path) -> Scenario:

@@ -44,7 +44,7 @@ from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text, read_json
 from pecli.locks import acquire, release
 from pecli.roles import Role
-from pecli.scenario import Scenario, scenario_from_dict
+from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
 
 FINAL = "final"
 LAST = "last"
@@ -91,11 +91,12 @@ class CheckpointMeta:
         """Refuse values that cannot describe a checkpoint (a hand-edited or damaged file): ``ValueError``."""
         if self.role not in ("pursuer", "evader"):
             raise ValueError(f"role must be pursuer or evader, not {self.role!r}")
-        for name, least in (("steps", 0), ("episodes", 0), ("frame_skip", 1), ("frame_stack", 1),
-                            ("history_length", 1), ("history_stride", 1)):
+        for name, least, most in (("steps", 0, MAX_STEPS), ("episodes", 0, MAX_STEPS), ("frame_skip", 1, 1000),
+                                  ("frame_stack", 1, 1000), ("history_length", 1, MAX_HISTORY),
+                                  ("history_stride", 1, MAX_HISTORY)):  # the scenario's own bounds
             value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < least:
-                raise ValueError(f"{name} must be a whole number >= {least}, not {value!r}")
+            if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:
+                raise ValueError(f"{name} must be a whole number from {least} to {most}, not {value!r}")
         for name in ("algo", "belief", "scenario", "scenario_hash", "opponent"):
             if not isinstance(getattr(self, name), str):
                 raise ValueError(f"{name} must be a string, not {getattr(self, name)!r}")

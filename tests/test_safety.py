@@ -135,7 +135,7 @@ def test_edited_metadata_is_one_clear_line(zoo: Path, tmp_path: Path) -> None:
     for change, message in (
         ({"frame_stack": 5}, "does not describe its network: actor.mu.0.weight has shape [16, 22] in the weights but "
                              "[16, 55] by the metadata"),
-        ({"frame_stack": "two"}, "damaged metadata (frame_stack must be a whole number >= 1, not 'two')"),
+        ({"frame_stack": "two"}, "damaged metadata (frame_stack must be a whole number from 1 to 1000, not 'two')"),
         ({"belief": "bimdn"}, "without its belief_kwargs"),
         ({"algo": "ppo"}, "unknown algorithm 'ppo'"),
         ({"policy_kwargs": {"net_arch": [64, 64]}}, "has shape [16, 22] in the weights but [64, 22] by the metadata"),
@@ -316,3 +316,61 @@ def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Sce
     data["ratings"][0]["elo"] = float("nan")
     results.write_text(json.dumps(data))
     assert len(tournament_ratings(tmp_path)) == len(data["ratings"]) - 1
+
+
+@pytest.mark.parametrize("edit, message", [
+    ({"policy_kwargs": {"net_arch": [2147483648], "n_critics": 2}}, "not a list of at most"),
+    ({"policy_kwargs": {"net_arch": [16, 16], "n_critics": 1_000_000}}, "n_critics"),
+    ({"policy_kwargs": {"net_arch": [16] * 100_000, "n_critics": 2}}, "not a list of at most"),
+    ({"policy_kwargs": {"net_arch": [4096, 4096], "n_critics": 2}}, "more than its"),
+    ({"frame_stack": 10**9}, "frame_stack must be a whole number from 1 to 1000"),
+    ({"history_length": 10**12}, "history_length must be"),
+])
+def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(zoo: Path, tmp_path: Path, quick: Scenario,
+                                                                      edit: dict, message: str) -> None:
+    from pecli.errors import PolicyError
+
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo, copy)
+    meta_path = copy / "run" / "pursuer" / "final.json"
+    meta = json.loads(meta_path.read_text())
+    meta_path.write_text(json.dumps({**meta, **edit}))
+    with pytest.raises(PolicyError, match=message):
+        resolve_policy(str(copy / "run" / "pursuer" / "final.zip"), "pursuer", quick)
+
+
+def test_weights_that_unpack_beyond_the_limit_are_not_read(zoo: Path, tmp_path: Path, quick: Scenario,
+                                                           monkeypatch) -> None:
+    from pecli.errors import PolicyError
+    from pecli.rl import checkpoint
+
+    monkeypatch.setattr(checkpoint, "MAX_WEIGHTS_BYTES", 1000)  # a zip bomb's member, at a test's size
+    with pytest.raises(PolicyError, match="unpack to more than 1,000 bytes"):
+        resolve_policy(str(zoo / "run" / "pursuer" / "final.zip"), "pursuer", quick)
+
+
+@pytest.mark.parametrize("old, new, message", [("fov: 2pi/3", "fov: pi/0", "divides by zero"),
+                                                ("fov: 2pi/3", "fov: " + "9" * 5000, "digits"),
+                                                ("dt: 0.1", "dt: 1e300", "less than or equal to 10"),
+                                                ("width: 8.0", "width: 1e308", "less than or equal to 1000000")])
+def test_a_config_that_python_cannot_compute_is_one_line(tmp_path: Path, old: str, new: str, message: str) -> None:
+    from pecli.errors import ConfigError
+    from pecli.scenario import load_scenario
+
+    text = (Path(__file__).parents[1] / "configs" / "quick.yaml").read_text()
+    assert old in text
+    path = tmp_path / "bad.yaml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(ConfigError, match=message):
+        load_scenario(path)
+    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000,
+                                 "--zoo", str(tmp_path / "z")])
+    assert result.exit_code == 1 and "too many digits" in result.output
+
+
+def test_names_with_markup_print_as_text(tmp_path: Path) -> None:
+    zoo = tmp_path / "z[/x]"
+    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--steps", "200", "--name", "r", "--zoo", str(zoo),
+                                 "-q", *TINY])
+    assert result.exit_code == 0, result.output
+    assert "z[/x]" in result.output

@@ -3,6 +3,7 @@ runs trials in parallel processes and reports; bad search spaces are refused in 
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -200,3 +201,29 @@ def test_the_default_search_space_is_valid_for_every_builtin_config() -> None:
         assert "algo" in space.parameters and text.startswith("#")
     result = runner.invoke(app, ["tune", "space"])
     assert result.exit_code == 0 and parse_space(yaml.safe_load(result.output), "printed").parameters
+
+
+def test_a_trial_whose_process_is_gone_is_failed_and_queued_again_at_once(tmp_path: Path) -> None:
+    import socket
+    import subprocess
+    import sys
+
+    storage = tune.open_storage(tune.sqlite_url(tmp_path / "studies.db"))
+    study = optuna.create_study(study_name="s", storage=storage, direction="maximize")
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(gone.stdout)  # a process that has ended
+    algo = {"algo": optuna.distributions.CategoricalDistribution(["td3", "sac"])}
+    dead = study.ask(algo)
+    dead.set_user_attr(tune.WORKER_ATTR, {"host": socket.gethostname(), "pid": dead_pid})
+    alive = study.ask(algo)  # run by a live process (this one's parent), or on another machine
+    alive.set_user_attr(tune.WORKER_ATTR, {"host": socket.gethostname(), "pid": os.getppid()})
+    elsewhere = study.ask(algo)
+    elsewhere.set_user_attr(tune.WORKER_ATTR, {"host": "another-machine", "pid": dead_pid})
+    assert tune.reclaim_dead_trials(study) == [dead.number]
+    trials = study.get_trials()
+    assert trials[dead.number].state == optuna.trial.TrialState.FAIL
+    assert trials[alive.number].state == trials[elsewhere.number].state == optuna.trial.TrialState.RUNNING
+    again = [t for t in trials if t.system_attrs.get("failed_trial") == dead.number]
+    assert len(again) == 1 and again[0].state == optuna.trial.TrialState.WAITING
+    assert again[0].params["algo"] == dead.params["algo"]
+    assert tune.reclaim_dead_trials(study) == []  # once

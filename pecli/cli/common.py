@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 import typer
 from rich.console import Console
+from rich.errors import MarkupError
 from rich.markup import escape
 
 from pecli.errors import PecliError
@@ -38,9 +39,20 @@ def _width() -> int | None:
     return PIPE_WIDTH
 
 
+class PlainConsole(Console):
+    """A console whose strings that are not valid markup (a path or a name with ``[/x]`` in it) print as they are,
+    instead of raising Rich's ``MarkupError``; callers still escape the names and paths they print."""
+
+    def render_str(self, text: str, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().render_str(text, *args, **kwargs)
+        except MarkupError:
+            return super().render_str(text, *args, **{**kwargs, "markup": False})
+
+
 _WIDTH = _width()
-console = Console(width=_WIDTH)
-err_console = Console(stderr=True, width=_WIDTH)
+console = PlainConsole(width=_WIDTH)
+err_console = PlainConsole(stderr=True, width=_WIDTH)
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from pecli.cli.common import console, err_console, one_torch_thread, require_batch, require_positive, scenario_for, sigterm_stops, user_errors
@@ -101,7 +102,7 @@ def tournament(
 
                 def report(result, cached: bool) -> None:
                     note = " (cached)" if cached else ""
-                    last = f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}"
+                    last = escape(f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
                     progress.update(task, advance=1, last=last)
 
                 results = run_tournament(scenario, found.players, pairings, episodes, list(range(seeds)), out,

@@ -111,8 +111,8 @@ class Solution:
                 values = data["values"]
                 steps = data["capture_steps"] if "capture_steps" in data.files else None
             problem = Problem.from_dict(meta.pop("problem"))
-        except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RecursionError, zipfile.BadZipFile,
-                ConfigError) as exc:
+        except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RecursionError, MemoryError,
+                zipfile.BadZipFile, ConfigError) as exc:
             raise SolutionError(f"{path}: not a readable HJ solution ({type(exc).__name__}: {exc})") from None
         if meta.pop("key", None) != problem.key():
             raise SolutionError(f"{path}: was made by another solver version; solve again")

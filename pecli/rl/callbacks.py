@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import torch as th
 from rich.console import Group
+from rich.markup import escape
 from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
@@ -163,7 +164,8 @@ class ProgressDisplay(BaseCallback):
             TimeRemainingColumn(),
             disable=not enabled,
         )
-        self.task = self.progress.add_task(description, total=total_steps, episodes=0, capture="  -  ", rate="-")
+        self.task = self.progress.add_task(escape(description), total=total_steps, episodes=0, capture="  -  ",
+                                           rate="-")
         self._last = 0.0
         self._start_time = 0.0
         self._start_steps = 0

@@ -30,10 +30,73 @@ from pecli.game import Game
 from pecli.rl.algorithms import get_algorithm
 from pecli.rl.belief import belief_observation_space
 from pecli.rl.extractors import BeliefExtractor
-from pecli.scenario import Scenario
+from pecli.scenario import MAX_BATCH, MAX_DEPTH, MAX_WIDTH, Scenario
 from pecli.trust import trusted, untrusted
 from pecli.zoo import CheckpointMeta, ZooError
 from wrappers.frozen_opponent import ACTION_SPACE, observation_space
+
+MAX_WEIGHTS_BYTES = 4 << 30  # one state dict of a checkpoint, unpacked: far above any network pecli trains
+MAX_CRITICS = 64
+MAX_QUANTILES = 10_000
+BYTES_PER_WEIGHT = 4  # float32
+SMALL_NETWORK_BYTES = 16 << 20  # what building a network of any metadata may cost before its weights are checked
+
+
+def _mlp(widths: list[int], inputs: int = 1, outputs: int = 1) -> int:
+    """Weights of a multilayer perceptron of hidden ``widths`` (biases left out: a lower bound)."""
+    sizes = [inputs, *widths, outputs]
+    return sum(a * b for a, b in zip(sizes, sizes[1:]))
+
+
+def _widths(value: Any, what: str) -> list[int]:
+    if not isinstance(value, list) or len(value) > MAX_DEPTH or not all(
+            isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= MAX_WIDTH for w in value):
+        raise ZooError(f"its metadata's {what} is not a list of at most {MAX_DEPTH} layers of 1 to {MAX_WIDTH} units")
+    return value
+
+
+def least_weights(meta: CheckpointMeta) -> int:
+    """A lower bound of the weights of the network ``meta`` describes (actor, critics, belief), from its numbers
+    alone: checked against the file before any layer is built, so metadata cannot make pecli allocate what its
+    weights do not hold. :class:`ZooError` for numbers no pecli network has."""
+    kwargs = meta.policy_kwargs
+    arch = kwargs.get("net_arch", [])
+    actor, critic = (arch.get("pi", []), arch.get("qf", [])) if isinstance(arch, dict) else (arch, arch)
+    actor, critic = _widths(actor, "net_arch"), _widths(critic, "net_arch")
+    critics = kwargs.get("n_critics", 1)
+    quantiles = kwargs.get("n_quantiles", 1)
+    for name, value, most in (("n_critics", critics, MAX_CRITICS), ("n_quantiles", quantiles, MAX_QUANTILES)):
+        if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= most:
+            raise ZooError(f"its metadata's {name} {value!r} is not a whole number from 1 to {most}")
+    total = _mlp(actor) + critics * _mlp(critic, outputs=quantiles)
+    belief = meta.belief_kwargs or {}
+    if belief:
+        for name, most in (("hidden", MAX_WIDTH), ("fc", MAX_WIDTH), ("components", 1024), ("samples", MAX_BATCH)):
+            value = belief.get(name, 1)
+            if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= most:
+                raise ZooError(f"its metadata's belief {name} {value!r} is not a whole number from 1 to {most}")
+        total += 8 * belief.get("hidden", 1) ** 2  # the LSTM's recurrent weights, both directions, four gates
+    return total
+
+
+def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
+    """:class:`ZooError` unless the checkpoint's ``policy.pth`` is no larger than :data:`MAX_WEIGHTS_BYTES` and
+    large enough for the network its metadata describes (read from the zip's directory, nothing unpacked)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            size = archive.getinfo("policy.pth").file_size
+    except KeyError:
+        raise ZooError(f"{path}: not a checkpoint (it has no policy weights)") from None
+    except (zipfile.BadZipFile, OSError):
+        raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None
+    try:
+        least = BYTES_PER_WEIGHT * least_weights(meta)
+    except ZooError as exc:
+        raise ZooError(f"{path}: {exc}") from None
+    if least > max(size, SMALL_NETWORK_BYTES):  # a small mismatch is named layer by layer once the weights load
+        raise ZooError(f"{path}: its metadata describes a network of at least {least:,} bytes of weights, more "
+                       f"than its {size:,} bytes hold (edited or damaged metadata)")
+
 
 def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cpu") -> Any:
     """What ``torch.save`` wrote to ``source`` (a file, or its bytes), if it is only tensors and plain
@@ -59,7 +122,11 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
     variables = None
     try:
         with zipfile.ZipFile(path) as archive:
-            entries = {name: archive.read(name) for name in archive.namelist() if name.endswith(".pth")}
+            members = [info for info in archive.infolist() if info.filename.endswith(".pth")]
+            if sum(info.file_size for info in members) > MAX_WEIGHTS_BYTES:
+                raise ZooError(f"{path}: its weights unpack to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli "
+                               "checkpoint")
+            entries = {info.filename: archive.read(info) for info in members}
     except zipfile.BadZipFile:
         raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None
     except OSError as exc:
@@ -128,7 +195,8 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
             return get_algorithm(meta.algo).cls.load(path, device=device).policy
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
             raise ZooError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
-    params, _ = read_weights(path, device)
+    params, _ = read_weights(path, device)  # bounded in size; refuses pickled objects
+    check_weights_size(meta, path)  # before any layer is built
     try:
         policy = build_policy(meta, scenario, device)
     except ZooError as exc:

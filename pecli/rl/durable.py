@@ -24,6 +24,7 @@ see :func:`pecli.rl.train.resume_seed`), so the partial episodes of the interval
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,7 +61,19 @@ class Ring:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Ring:
-        return cls(int(data["capacity"]), int(data["added"]), [Chunk(**c) for c in data["chunks"]])
+        chunks = [Chunk(**c) for c in data["chunks"]]
+        ring = cls(_count(data["capacity"], "capacity"), _count(data["added"], "added"), chunks)
+        for c in chunks:
+            if not isinstance(c.file, str) or _count(c.start, "start") > _count(c.end, "end"):
+                raise ValueError(f"a chunk of rows {c.start!r} to {c.end!r} in {c.file!r}")
+        return ring
+
+
+def _count(value: Any, name: str) -> int:
+    """``value`` if it is a whole number >= 0; ``ValueError`` naming ``name`` otherwise."""
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise ValueError(f"{name} must be a whole number >= 0, not {value!r}")
+    return value
 
 
 @dataclass
@@ -94,7 +107,15 @@ class Record:
         if data.get("format") != FORMAT:
             raise ValueError(f"format {data.get('format')!r}, this pecli reads {FORMAT}")
         rings = {key: Ring.from_dict(data[key]) if data.get(key) else None for key in ("replay", "belief")}
-        return cls(**{**data, **rings})
+        record = cls(**{**data, **rings})
+        for name in ("steps", "episodes", "n_updates"):
+            _count(getattr(record, name), name)
+        if not isinstance(record.cpu_seconds, int | float) or not math.isfinite(record.cpu_seconds):
+            raise ValueError(f"cpu_seconds must be a number, not {record.cpu_seconds!r}")
+        if not isinstance(record.model, str) or not isinstance(record.belief_optimizer, str | None) \
+                or not isinstance(record.belief_rng, dict | None) or not isinstance(record.extra, dict):
+            raise ValueError("model and belief_optimizer name files; belief_rng and extra are JSON objects")
+        return record
 
 
 def _own_file_name(name: object) -> bool:
@@ -227,7 +248,8 @@ class DurableState:
             if "allow_pickle" in str(exc):  # an object array: only unpickling could read it
                 raise untrusted(self.directory, "its buffer files hold pickled objects, not plain arrays") from None
             raise ZooError(f"cannot restore {self.directory}: {exc}") from None
-        except (OSError, KeyError, RuntimeError) as exc:  # a truncated array, another buffer size
+        except (OSError, KeyError, RuntimeError, MemoryError) as exc:  # a truncated array, another buffer size, a
+            # header that claims more rows than memory holds
             raise ZooError(f"cannot restore {self.directory}: {type(exc).__name__}: {exc}") from None
         self.record = record
 

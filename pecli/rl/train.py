@@ -77,6 +77,8 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = text
         except RecursionError:
             raise PecliError(f"--set {key.strip()}: the value is nested too deeply") from None
+        except ValueError:  # an integer of more digits than Python converts
+            raise PecliError(f"--set {key.strip()}: the number has too many digits") from None
         if isinstance(value, str):
             try:
                 number = float(value)

@@ -23,6 +23,7 @@ import math
 import multiprocessing
 import os
 import shutil
+import socket
 import time
 import warnings
 from collections.abc import Callable
@@ -50,6 +51,7 @@ warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 EVAL_SEED = 7_000_003  # evaluation games: no training run starts its games from this seed
+WORKER_ATTR = "worker"  # a trial's user attribute: the host and PID of the process that runs it
 HEARTBEAT_S = 30  # a running trial tells the storage it is alive this often ...
 GRACE_S = 120  # ... and is taken as killed (and run again) when it has not for this long
 PRUNERS = ("median", "halving", "none")
@@ -210,6 +212,8 @@ def optimize(worker: Worker) -> None:
                                            group=True, constant_liar=True),
         pruner=make_pruner(settings.pruner, settings.evaluations),
     )
+    for number in reclaim_dead_trials(study):
+        worker.report(f"trial {number} was running in a process that is gone: marked failed, and run again")
     left = worker.total - _finished(study)
     if left <= 0:
         return
@@ -219,6 +223,37 @@ def optimize(worker: Worker) -> None:
         objective, n_trials=left, catch=(PecliError, ValueError, RuntimeError),  # a failed trial, not a failed study
         callbacks=[optuna.study.MaxTrialsCallback(worker.total, states=states), _reporter(worker.report)],
     )
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def reclaim_dead_trials(study: optuna.Study) -> list[int]:
+    """Fail the study's running trials whose worker ran on this machine and is gone (killed, or the machine
+    restarted), and queue each again once (as Optuna does for a trial whose heartbeat stopped, without waiting out
+    its grace period); returns their numbers. Trials run elsewhere wait for their heartbeat's grace period."""
+    host, reclaimed = socket.gethostname(), []
+    retry = optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
+    for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+        worker = trial.user_attrs.get(WORKER_ATTR)
+        if not isinstance(worker, dict) or worker.get("host") != host or not isinstance(worker.get("pid"), int):
+            continue
+        if worker["pid"] != os.getpid() and _process_alive(worker["pid"]):
+            continue
+        try:
+            study._storage.set_trial_state_values(trial._trial_id, optuna.trial.TrialState.FAIL)
+        except RuntimeError:  # it finished or failed meanwhile (another worker reclaimed it)
+            continue
+        retry(study, study._storage.get_trial(trial._trial_id))
+        reclaimed.append(trial.number)
+    return reclaimed
 
 
 def _reporter(report: Callable[[str], None]) -> Callable[[optuna.Study, optuna.trial.FrozenTrial], None]:
@@ -250,6 +285,7 @@ class Objective:
         self.base = with_overrides(self.scenario, self.space.fixed, source="the study's fixed settings")
 
     def __call__(self, trial: optuna.Trial) -> float:
+        trial.set_user_attr(WORKER_ATTR, {"host": socket.gethostname(), "pid": os.getpid()})  # who runs it
         overrides = suggest(trial, self.space, self.base.training)
         trial.set_user_attr("overrides", overrides)
         scenario = with_overrides(self.scenario, overrides, source=f"trial {trial.number}")

@@ -566,7 +566,8 @@ def exploit(args: argparse.Namespace) -> None:
             with sigterm_stops():
                 result = exploit_pair(str(players["pursuer"]), str(players["evader"]), load_scenario(args.config),
                                       args.zoo / "exploit" / name, warm=args.warm, cpu_minutes=args.cpu_minutes,
-                                      seeds=tuple(range(args.seeds)), episodes=args.episodes)
+                                      seeds=tuple(range(args.seeds)), episodes=args.episodes,
+                                      report=lambda line: print(line, file=sys.stderr, flush=True))
         except PecliError as error:
             sys.exit(str(error))
         except KeyboardInterrupt:

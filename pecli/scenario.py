@@ -443,9 +443,16 @@ def builtin_config_dir() -> Path:
     return Path("configs")
 
 
+BUILTIN_SCENARIOS = ("car_vs_car", "league", "paper", "point_mass", "quick", "robots", "tuned")
+BUILTIN_EXPERIMENTS = ("exploitability", "schedules", "smoke", "strength", "strength-exploiters", "strength-floor",
+                       "strength-joingames", "strength-lite", "strength-share", "strength-small", "table1",
+                       "table1-small", "table2")
+"""pecli's own scenarios and experiments, by name: a file a user saves beside them never becomes a built-in."""
+
+
 def builtin_names() -> list[str]:
     """Names of the built-in scenarios (``paper``, ``quick``, ...)."""
-    return sorted(p.stem for p in builtin_config_dir().glob("*.yaml"))
+    return sorted(name for name in BUILTIN_SCENARIOS if (builtin_config_dir() / f"{name}.yaml").is_file())
 
 
 def builtin_experiment_dir() -> Path:
@@ -455,13 +462,13 @@ def builtin_experiment_dir() -> Path:
 
 def builtin_experiments() -> list[str]:
     """Names of the built-in experiments (``table1``, ``strength``, ...)."""
-    return sorted(p.stem for p in builtin_experiment_dir().glob("*.yaml"))
+    return sorted(name for name in BUILTIN_EXPERIMENTS if (builtin_experiment_dir() / f"{name}.yaml").is_file())
 
 
 def resolve_config_path(path_or_name: str | Path) -> Path:
     """A path as given, or the built-in config of that name."""
     path = Path(path_or_name)
-    if path.exists() or path.suffix in (".yaml", ".yml") or len(path.parts) > 1:
+    if path.exists() or path.suffix in (".yaml", ".yml") or len(path.parts) > 1 or str(path) not in BUILTIN_SCENARIOS:
         return path
     return builtin_config_dir() / f"{path_or_name}.yaml"
 

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from pecli.errors import PecliError
 
-FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FUZZ = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 scalars = st.one_of(st.none(), st.booleans(), st.integers(min_value=-(10**30), max_value=10**30),
                     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20))
@@ -166,7 +166,7 @@ def test_a_best_response_record_from_elsewhere_is_refused(tmp_path: Path, reader
         only_clear_errors(_read_record, tmp_path / "exploit.json")
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(episodes=st.one_of(st.integers(min_value=-3, max_value=30), st.text(max_size=8)),
        seed=st.one_of(st.integers(min_value=-3, max_value=2**40), st.text(max_size=8)),
        pursuer=st.one_of(st.sampled_from(["pure-pursuit", "interceptor", "greedy", "nash:", "hj:x=1", "a:b"]),

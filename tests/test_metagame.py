@@ -4,6 +4,7 @@ a player (``pecli tournament --nash``, ``nash:FOLDER``)."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -54,8 +55,10 @@ def test_what_is_no_capture_matrix_is_refused(bad: np.ndarray) -> None:
         maximin(bad)
 
 
-def _tournament(tmp_path: Path) -> Path:
-    out = tmp_path / "t"
+@pytest.fixture(scope="module")
+def played(tmp_path_factory) -> Path:
+    """A tournament of scripted players with --nash, played once for the module."""
+    out = tmp_path_factory.mktemp("nash") / "t"
     result = runner.invoke(app, ["tournament", "pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter",
                                  "-c", "quick", "-n", "60", "--seeds", "1", "-w", "1", "--out", str(out), "--nash"])
     assert result.exit_code == 0, result.output
@@ -63,8 +66,15 @@ def _tournament(tmp_path: Path) -> Path:
     return out
 
 
-def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(tmp_path: Path, quick: Scenario) -> None:
-    out = _tournament(tmp_path)
+def _tournament(played: Path, tmp_path: Path) -> Path:
+    """A copy of the played tournament's folder, to change."""
+    shutil.copytree(played, tmp_path / "t")
+    return tmp_path / "t"
+
+
+def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(played: Path, tmp_path: Path,
+                                                                   quick: Scenario) -> None:
+    out = _tournament(played, tmp_path)
     record = json.loads((out / "nash.json").read_text())
     weights = {m["name"]: m["weight"] for m in record["pursuer"]}
     assert set(weights) <= {"pure-pursuit", "interceptor"} and sum(weights.values()) == pytest.approx(1.0)
@@ -87,8 +97,9 @@ def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(tmp_path: Pat
     (lambda r: {**r, "pursuer": []}, "not a Nash mixture"),
     (lambda r: json.loads("[" * 100_000 + "]" * 100_000), "nested too deep"),
 ])
-def test_a_bad_mixture_file_is_refused_in_one_line(tmp_path: Path, quick: Scenario, change, message: str) -> None:
-    out = _tournament(tmp_path) if not (tmp_path / "t").exists() else tmp_path / "t"
+def test_a_bad_mixture_file_is_refused_in_one_line(played: Path, tmp_path: Path, quick: Scenario, change,
+                                                   message: str) -> None:
+    out = _tournament(played, tmp_path)
     record = json.loads((out / "nash.json").read_text())
     try:
         changed = json.dumps(change(record))

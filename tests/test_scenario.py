@@ -219,3 +219,21 @@ def test_set_overrides_are_validated_as_strictly_as_files(quick) -> None:
         with pytest.raises(ConfigError, match=expected):
             with_overrides(quick, parse_overrides([item]))
     assert with_overrides(quick, parse_overrides(["learning_rate=1e-4", "steps=2e4"])).training.steps == 20_000
+
+
+def test_a_file_saved_beside_the_builtins_never_becomes_one(tmp_path, monkeypatch) -> None:
+    import shutil
+
+    from pecli import scenario as module
+    from pecli.errors import ConfigError
+
+    configs = tmp_path / "configs"
+    shutil.copytree(module.builtin_config_dir(), configs)
+    (configs / "mine.yaml").write_text((configs / "quick.yaml").read_text().replace("name: quick", "name: mine"))
+    (configs / "experiments" / "mine.yaml").write_text((configs / "experiments" / "smoke.yaml").read_text())
+    monkeypatch.setattr(module, "builtin_config_dir", lambda: configs)
+    assert "mine" not in module.builtin_names() and "quick" in module.builtin_names()
+    assert "mine" not in module.builtin_experiments() and "smoke" in module.builtin_experiments()
+    with pytest.raises(ConfigError, match="config not found: mine"):
+        module.load_scenario("mine")
+    assert module.load_scenario(configs / "mine.yaml").name == "mine"  # as a file it loads

@@ -67,6 +67,9 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
     result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--cpu-minutes", "1",
                                  "--dir", str(folder)])
     assert result.exit_code == 1 and "keeps its settings (not --cpu-minutes)" in result.output
+    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--dir", str(folder)])
+    assert result.exit_code == 0 and "2 trials of" in result.output  # its own number, not the default 30
+    assert len(finished(study)) == 2
 
     killed = study.ask({"algo": optuna.distributions.CategoricalDistribution(["td3", "sac"])})  # its process died
     storage.record_heartbeat(killed._trial_id)

@@ -12,6 +12,9 @@ from pecli.cli.common import TrainConfigOption, console, err_console, sigterm_st
 from pecli.cli.train import AlgoChoice, DeviceOption
 from pecli.errors import PecliError
 
+DEFAULT_TRIALS = 30
+TRIALS_ATTR = "trials"  # the study's user attribute: how many trials it has when done
+
 app = typer.Typer(help="Search training settings with Optuna, and report on a study.", no_args_is_help=True)
 
 DEFAULT_DIR = Path("tune")
@@ -83,7 +86,16 @@ def _tune(what: str, **options: Any) -> None:
             raise PecliError("--seed must be between 0 and 2**32 - 1")
         _check_opponents(settings, scenario)
         study = new_study(settings, storage, o["study"] or f"{scenario.name}-{what}")
-    total = o["trials"] if o["trials"] is not None else 30
+    kept = study.user_attrs.get(TRIALS_ATTR)
+    if o["trials"] is not None:
+        total = o["trials"]
+    elif o["resume"] and isinstance(kept, int) and not isinstance(kept, bool) and kept >= 1:
+        total = kept  # a resumed study goes on to its own number of trials, not to the default
+    elif o["resume"]:  # a study of an older pecli, which did not record it: finish what is started
+        total = max(len(study.trials), 1)
+    else:
+        total = DEFAULT_TRIALS
+    study.set_user_attr(TRIALS_ATTR, total)
     folder = o["dir"] / study.study_name
     runs = f"{settings.repeats} runs of " if settings.repeats > 1 else ""
     err_console.print(f"study [bold]{study.study_name}[/] in {storage}: {what} on {settings.scenario['name']}, "
@@ -124,7 +136,7 @@ def _command(what: str, doc: str) -> Any:
         eval_opponents: Annotated[str | None, typer.Option("--eval-opponents", help="Comma-separated opponents the "
                                                            "learner is scored against (default: --opponent).")] = None,
         trials: Annotated[int | None, typer.Option("--trials", "-n", help="Trials the study has when done (complete "
-                                                   "or pruned; default 30).")] = None,
+                                                   "or pruned; default 30, a resumed study its own).")] = None,
         cpu_minutes: Annotated[float | None, typer.Option("--cpu-minutes", help="CPU budget of a training run "
                                                           "(a trial has --repeats of them; default 3).")] = None,
         evaluations: Annotated[int | None, typer.Option("--evaluations", help="Evaluations per training run, evenly "

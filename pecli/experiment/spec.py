@@ -285,7 +285,8 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
 def experiment_path(name_or_path: str | Path) -> Path:
     """The YAML file of an experiment given as a file or a built-in name (:func:`builtin_experiments`)."""
     path = Path(name_or_path)
-    if not path.is_file() and path.suffix not in (".yaml", ".yml") and len(path.parts) == 1:
+    if not path.is_file() and path.suffix not in (".yaml", ".yml") and len(path.parts) == 1 \
+            and str(name_or_path) in builtin_experiments():
         path = builtin_experiment_dir() / f"{name_or_path}.yaml"
     if not path.is_file():
         known = ", ".join(builtin_experiments())

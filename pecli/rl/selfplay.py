@@ -191,6 +191,12 @@ def tensorboard_name(role: Role, kind: str, r: int) -> str:
     return role if kind == MAIN else f"exploiter-{role}/r{r:03d}"
 
 
+def _hours(seconds: float, budget: float) -> str:
+    """CPU seconds as hours: two decimals, or two significant digits under a budget below 0.1 CPU-h (0.0012 of
+    0.002, not 0.00)."""
+    return f"{seconds / 3600:.2f}" if budget >= 0.1 else f"{seconds / 3600:.2g}"
+
+
 def turn_seed(seed: int, round: int, role: Role, kind: str = MAIN) -> int:
     """The seed of one turn: fixed by the run's seed, so a resumed run plays the turns it would have."""
     entropy = [seed, round, ROLES.index(role)] + ([1] if kind == EXPLOITER else [])
@@ -412,7 +418,8 @@ class SelfPlay:
 
     def _budget_line(self) -> str:
         rounds = self.whole_rounds()
-        return (f"budget reached: {self.state.cpu_seconds(through=rounds) / 3600:.2f} of {self.state.cpu_hours:g} "
+        return (f"budget reached: {_hours(self.state.cpu_seconds(through=rounds), self.state.cpu_hours)} of "
+                f"{self.state.cpu_hours:g} "
                 f"CPU-h after round {rounds}")
 
     def averages(self) -> dict[Role, Path]:
@@ -655,7 +662,9 @@ class SelfPlay:
             role = turn.role
             rate = turn.capture_rate if role == "pursuer" else 1 - turn.capture_rate
             what = ("captures" if role == "pursuer" else "escapes") + (f" {rate:.2f}" if turn.episodes else " -")
-            if turn.learner == MAIN:
+            if turn.learner == MAIN and not turn.episodes:
+                parts.append(f"{role}: no episode finished vs {turn.opponents} {opponent_of(role)}s")
+            elif turn.learner == MAIN:
                 parts.append(f"{role} {what} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
             else:
                 tried = "" if turn.join_rate is None else f", {turn.join_rate:.2f} in its join games"
@@ -665,5 +674,5 @@ class SelfPlay:
                              + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else ""))
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
         used = "" if self.state.cpu_hours is None else \
-            f"; {self.state.cpu_seconds() / 3600:.2f} of {self.state.cpu_hours:g} CPU-h"
+            f"; {_hours(self.state.cpu_seconds(), self.state.cpu_hours)} of {self.state.cpu_hours:g} CPU-h"
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s{used})"

@@ -185,3 +185,12 @@ def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> 
 def test_python_dash_m_and_console_script() -> None:
     result = subprocess.run([sys.executable, "-m", "pecli", "--version"], capture_output=True, text=True, check=False)
     assert result.returncode == 0 and result.stdout.strip() == f"pecli {__version__}"
+
+
+@pytest.mark.parametrize("args, message", [(["train", "pursuerr"], "'pursuerr' is not one of"),
+                                           (["play", "--nope"], "No such option: --nope")])
+def test_a_usage_error_is_one_line(args: list[str], message: str) -> None:
+    result = invoke(*args)
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+    assert f"see `pecli {args[0]} --help`" in lines[0]

@@ -6,9 +6,12 @@ import inspect
 import os
 from typing import Annotated
 
+import click
 import typer
+import typer.rich_utils
 
 from pecli import __version__
+from pecli.cli.common import err_console
 from pecli.trust import TRUST_VARIABLE
 from pecli.cli import config, experiment, exploit, export, hj, play, selfplay, tournament, train, tune, zoo
 
@@ -60,6 +63,17 @@ app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")
 app.add_typer(export.app, name="export", rich_help_panel="Checkpoints")
 app.add_typer(config.app, name="config", rich_help_panel="Scenarios")
 app.add_typer(hj.app, name="hj", rich_help_panel="Baselines")
+
+
+def _usage_error(error: click.ClickException) -> None:
+    """A usage error (a misspelt role, a missing option) as one line, like every other refusal: ``error: ...`` with
+    where the help is, instead of Typer's boxed panel (its exit code stays click's, 2)."""
+    ctx = getattr(error, "ctx", None)
+    where = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+    err_console.print(f"error: {error.format_message()}{where}", markup=False, highlight=False, soft_wrap=True)
+
+
+typer.rich_utils.rich_format_error = _usage_error  # typer.core calls it through the module: one place to change
 
 
 def reflow(doc: str) -> str:

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -99,6 +100,9 @@ def play(
 
         if render.suffix.lower() == ".gif":
             animate_episode(recording, render)
+            drawn = f"episode 1 of the {episodes}" if episodes > 1 else "the episode"
         else:
             draw_episodes(recording, render, episodes=record)
-        err_console.print(f"wrote {render}", highlight=False)
+            drawn = f"the first {min(record, episodes)} of the {episodes} episodes" if episodes > record else \
+                f"the {episodes} episode{'s' if episodes > 1 else ''}"
+        err_console.print(f"wrote {escape(str(render))}: {drawn}", highlight=False)

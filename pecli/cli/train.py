@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
 from pecli.belief import BELIEF_KINDS
@@ -127,7 +128,8 @@ def train(
     )
 
     def started(run: Run) -> None:
-        err_console.print(f"run [bold]{run.path}[/]: {role_name} vs {job.opponent} on {scenario.name}, "
+        err_console.print(f"run [bold]{escape(str(run.path))}[/]: {role_name} vs {escape(job.opponent)} on "
+                          f"{escape(scenario.name)}, "
                           f"{scenario.training.steps:,} steps", highlight=False)
 
     try:
@@ -137,4 +139,7 @@ def train(
         err_console.print(f"[yellow]interrupted[/]: saved {stop.checkpoint}; "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
-    err_console.print(f"[green]done[/]: {final}", highlight=False)
+    run_dir = zoo / job.name
+    err_console.print(f"[green]done[/]: {escape(str(final))}\n  checkpoints and their metadata in "
+                      f"{escape(str(run_dir / role_name))}/, the run's config and command in {escape(str(run_dir))}/\n"
+                      f"  learning curves: tensorboard --logdir {escape(str(run_dir / 'tb'))}", highlight=False)

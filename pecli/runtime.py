@@ -95,10 +95,11 @@ class ExportedModel:
             self.limits = np.asarray(sidecar["command_limits"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as exc:
             raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
-        positive = {"dt_s": self.dt, "frame_skip": self.frame_skip, "frame_stack": self.frame_stack,
-                    "history_length": self.history_length, "history_stride": self.history_stride, "dim": self.dim}
-        bad = [f"{key} = {value}" for key, value in positive.items() if not value > 0]
-        if self.draws < 0:
+        bounded = {"dt_s": (self.dt, 10.0), "frame_skip": (self.frame_skip, 1000), "frame_stack": (self.frame_stack, 1000),
+                   "history_length": (self.history_length, 10_000), "history_stride": (self.history_stride, 10_000),
+                   "dim": (self.dim, 10_000)}  # a scenario's own bounds: nothing an export can have is larger
+        bad = [f"{key} = {value}" for key, (value, most) in bounded.items() if not 0 < value <= most]
+        if not 0 <= self.draws <= 65_536:
             bad.append(f"draws = {self.draws}")
         if bad:
             raise ExportError(f"damaged sidecar: {', '.join(bad)}")
@@ -240,6 +241,8 @@ class Controller:
         if seen:
             out[m.own_dim : m.own_dim + m.opponent_dim] = opponent
         out[-2] = 1.0 if seen else -1.0
+        if time is not None and not math.isfinite(float(time)):
+            raise ValueError(f"time must be a finite number of seconds, got {time}")
         out[-1] = self.ticks * m.dt if time is None else float(time)
         return out
 

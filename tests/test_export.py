@@ -513,3 +513,23 @@ def test_export_check_refuses_an_edited_sidecar(exports, tmp_path: Path, edit, e
     result = runner.invoke(app, ["export", "check", str(copy), str(checkpoint), "-n", "1"])
     assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
     assert re.search(expected, result.output.replace("\n", "")), result.output
+
+
+def test_the_runtime_refuses_a_time_that_is_not_a_number(exports) -> None:
+    """A NaN time is the caller's mistake, named as such, not a NaN command blamed on the model."""
+    controller = Controller.load(exports["none"][1])
+    with pytest.raises(ValueError, match="time must be a finite number"):
+        controller.step(np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0]), seen=True, time=float("nan"))
+
+
+@pytest.mark.parametrize("key, value", [("history_length", 10**12), ("frame_stack", 10**9), ("dt_s", 1e300)])
+def test_a_sidecar_claiming_a_huge_window_is_refused_before_allocating(exports, tmp_path: Path, key: str,
+                                                                       value: float) -> None:
+    model = exports["none"][1]
+    copy = tmp_path / "m.onnx"
+    copy.write_bytes(model.read_bytes())
+    sidecar = json.loads(sidecar_path(model).read_text())
+    sidecar["control"][key] = value
+    sidecar_path(copy).write_text(json.dumps(sidecar))
+    with pytest.raises(ExportError, match=f"damaged sidecar: {key} = "):
+        Controller.load(copy)

@@ -188,6 +188,9 @@ def test_a_selfplay_trial_scores_both_sides_after_each_round(quick: Scenario, tm
     ("parameters: {}", "parameters"),
     ("[1, 2]", "a search space is a mapping"),
     ("parameters: [", "not valid YAML"),
+    ("parameters: {tau: {type: float, low: 0.1, high: 0.2}, tau: {type: float, low: 0.1, high: 0.3}}",
+     "duplicate key 'tau'"),
+    ("parameters: {tau: {type: float, low: true, high: 0.2}}", "a bound is a number"),
 ])
 def test_bad_search_spaces_are_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
     space = write_space(tmp_path, text)

@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from pecli.errors import PecliError
-from pecli.scenario import ALGOS, Scenario, Training
+from pecli.scenario import ALGOS, Scenario, StrictLoader, Training
 
 DEFAULT_SPACE = Path(__file__).with_name("search_space.yaml")
 DERIVED = ("net_width", "net_depth")  # make net_arch
@@ -41,6 +41,13 @@ class Parameter(BaseModel):
     algos: list[Literal[ALGOS]] | None = Field(  # type: ignore[valid-type]
         default=None, description="chosen only in trials of these algorithms"
     )
+
+    @field_validator("low", "high", mode="before")
+    @classmethod
+    def _a_number(cls, value: Any) -> Any:
+        if isinstance(value, bool):
+            raise ValueError("a bound is a number, not true or false")
+        return value
 
     @model_validator(mode="after")
     def _consistent(self) -> Parameter:
@@ -99,7 +106,7 @@ def load_space(path: str | Path | None, scenario: Scenario) -> tuple[SearchSpace
     path = Path(path) if path is not None else DEFAULT_SPACE
     try:
         text = path.read_text()
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader that refuses duplicate keys)
     except OSError as exc:
         raise PecliError(f"cannot read the search space {path}: {exc.strerror or exc}") from None
     except yaml.YAMLError as exc:

@@ -67,12 +67,17 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
     missing, larger than ``max_bytes``, not JSON or nested too deep to parse."""
     from pecli.errors import PecliError
 
+    import stat
+
     path = Path(path)
     try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise PecliError(f"{path}: {size:,} bytes is more than a {what} can be ({max_bytes:,})")
-        return json.loads(path.read_text(encoding="utf-8"))
+        if not stat.S_ISREG(path.stat().st_mode):  # a FIFO would block, a device never end
+            raise PecliError(f"{path}: not a regular file, so no {what}")
+        with path.open("rb") as handle:
+            data = handle.read(max_bytes + 1)  # bounded whatever the size the file system reports
+        if len(data) > max_bytes:
+            raise PecliError(f"{path}: more bytes than a {what} can be ({max_bytes:,})")
+        return json.loads(data.decode("utf-8"))
     except FileNotFoundError:
         raise PecliError(f"{path}: no {what} there") from None
     except (OSError, ValueError, RecursionError) as exc:  # ValueError: not JSON, or an integer of > 4300 digits

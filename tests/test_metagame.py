@@ -114,3 +114,11 @@ def test_nash_refuses_a_sampled_tournament(tmp_path: Path) -> None:
     result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "--sample", "1", "--nash",
                                  "--out", str(tmp_path)])
     assert result.exit_code == 1 and "--nash needs every pairing" in result.output
+
+
+def test_nash_conv_is_what_the_best_replies_gain_on_a_pair_of_mixtures() -> None:
+    m = np.array([[0.9, 0.2], [0.3, 0.6]])
+    pure = nash_conv(m, np.array([1.0, 0.0]), np.array([1.0, 0.0]))
+    assert pure == pytest.approx(0.9 - 0.2)  # the best pursuer against x catches 0.9; the best evader holds a to 0.2
+    game = solve(["a", "b"], ["x", "y"], m)
+    assert nash_conv(m, game.pursuer_mixture, game.evader_mixture) == pytest.approx(0.0, abs=1e-7)

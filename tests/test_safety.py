@@ -215,7 +215,9 @@ def test_a_run_record_that_names_code_imports_nothing(stopped: Path, monkeypatch
     result = resume(stopped)
     assert result.exit_code == 1 and "imports no code a file names" in result.output
     assert not marker.exists()
-    (stopped / "run.json").write_text(json.dumps({**record, "opponent": "/elsewhere/evader/final.zip"}))
+    outside = stopped.parent.parent / f"{stopped.parent.name}-outside.zip"  # a file out of the zoo
+    outside.write_bytes(b"PK")
+    (stopped / "run.json").write_text(json.dumps({**record, "opponent": str(outside)}))
     result = resume(stopped)
     assert result.exit_code == 1 and "outside" in result.output and "--opponent" in result.output
     (stopped / "run.json").write_text(json.dumps({**record, "seed": "zero"}))
@@ -266,8 +268,9 @@ def test_a_selfplay_pool_entry_that_names_code_imports_nothing(quick: Scenario, 
     play = SelfPlay(SelfPlayJob(scenario, tmp_path, "sp", resume=True, progress=False))
     with pytest.raises(PolicyError, match="imports no code"):
         play._policy("evader", "os:system")
+    (tmp_path.parent / f"{tmp_path.name}-elsewhere.zip").write_bytes(b"PK")
     with pytest.raises(PolicyError, match="outside"):
-        play._policy("evader", "../../elsewhere.zip")
+        play._policy("evader", f"../../{tmp_path.name}-elsewhere.zip")
 
 
 DEEP = "[" * 100_000 + "]" * 100_000
@@ -374,3 +377,35 @@ def test_names_with_markup_print_as_text(tmp_path: Path) -> None:
                                  "-q", *TINY])
     assert result.exit_code == 0, result.output
     assert "z[/x]" in result.output
+
+
+def test_a_record_naming_a_file_that_is_not_there_imports_nothing(tmp_path: Path, quick: Scenario) -> None:
+    """'this:x.zip' looks like a file; were it resolved, a missing file would be taken for module:Class."""
+    from pecli.errors import PolicyError
+    from pecli.policies.registry import recorded_policy
+
+    for inside in (None, tmp_path):
+        with pytest.raises(PolicyError, match="which is not there"):
+            recorded_policy("this:x.zip", inside, "a record")
+    nash = tmp_path / "nash.json"
+    nash.write_text(json.dumps({"kind": "nash", "scenario": "quick", "scenario_hash": quick.fingerprint(),
+                                "value": 0.5, "pursuer": [{"name": "m", "spec": "this:x.zip", "weight": 1.0}],
+                                "evader": [{"name": "e", "spec": "greedy", "weight": 1.0}]}))
+    with pytest.raises(PolicyError, match="which is not there"):
+        resolve_policy(f"nash:{tmp_path}", "pursuer", quick)
+    assert resolve_policy(f"nash:{tmp_path}", "evader", quick).names == ["e"]
+
+
+def test_a_record_that_is_not_a_regular_file_is_not_read(tmp_path: Path) -> None:
+    import os
+
+    from pecli.errors import PecliError
+    from pecli.io import read_json
+
+    fifo = tmp_path / "results.json"
+    os.mkfifo(fifo)  # reading it would block for ever
+    with pytest.raises(PecliError, match="not a regular file"):
+        read_json(fifo, "record")
+    (tmp_path / "zero.json").symlink_to("/dev/zero")  # would never end
+    with pytest.raises(PecliError, match="not a regular file"):
+        read_json(tmp_path / "zero.json", "record")

@@ -81,9 +81,14 @@ def _member_spec(spec: str, folder: Path) -> str:
         return spec
     if family_of(spec) == "nash":
         raise PolicyError(f"{spec}: a Nash mixture does not nest another")
+    if family_of(spec) is not None:  # hj: an HJ player, whose solution is read as data
+        return spec
     path = Path(spec)
     if path.suffix.lower() in (".zip", ".onnx", ".npz"):
-        return str(path if path.is_absolute() else folder / path)
+        member = path if path.is_absolute() else folder / path
+        if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
+            raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
+        return str(member)
     if not trusted():
         raise PolicyError(f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
                           "no code a file names unless you pass `pecli --trust`")

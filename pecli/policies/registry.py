@@ -133,6 +133,8 @@ def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
         return spec
     path = Path(spec)
     if path.suffix.lower() in _LOADERS:
+        if not path.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
+            raise PolicyError(f"{source} names the policy file {spec}, which is not there")
         if inside is None:
             return spec
         real, room = Path(os.path.realpath(path)), Path(os.path.realpath(inside))

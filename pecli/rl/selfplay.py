@@ -161,8 +161,17 @@ class SelfPlayState:
             pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
             turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
             cpu_hours=None if data.get("cpu_hours") is None else float(data["cpu_hours"]),  # absent in older records
-            payoffs={str(key): [int(value[0]), int(value[1])] for key, value in data.get("payoffs", {}).items()},
+            payoffs={str(key): _payoff(value) for key, value in data.get("payoffs", {}).items()},
         )
+
+
+def _payoff(value: Any) -> list[int]:
+    """A meta-game record ``[captures, games]``; ``ValueError`` for counts no pairing gives."""
+    captures, games = value
+    if not all(isinstance(x, int) and not isinstance(x, bool) for x in (captures, games)) or not 0 <= captures <= games \
+            or games < 1:
+        raise ValueError(f"a payoff of {captures!r} captures in {games!r} games")
+    return [captures, games]
 
 
 def read_state(run: Run) -> SelfPlayState:
@@ -345,7 +354,7 @@ class SelfPlay:
     def _nash_mixture(self, side: Role) -> dict[str, float]:
         """``side``'s Nash mixture of the meta-game between the two pools (:mod:`pecli.metagame`), after playing
         the pairings not yet in the record (``nash_games`` games each, from the same start states; the record is
-        saved, so a resumed run plays none twice)."""
+        saved with the turn)."""
         pursuers, evaders = self.state.pools["pursuer"].entries, self.state.pools["evader"].entries
         missing = [(p, e) for p in pursuers for e in evaders if f"{p.name}|{e.name}" not in self.state.payoffs]
         if missing:
@@ -360,7 +369,7 @@ class SelfPlay:
                 match, _ = play_match(self.scenario, player("pursuer", p.spec), player("evader", e.spec),
                                       self.settings.nash_games, seed=self.state.seed)
                 self.state.payoffs[f"{p.name}|{e.name}"] = [int(match.captured.sum()), match.episodes]
-            self._save_state()
+            # saved with the turn (a stop before it plays them again: the pools' records stay as committed)
         matrix = np.array([[self.state.payoffs[f"{p.name}|{e.name}"][0] / self.state.payoffs[f"{p.name}|{e.name}"][1]
                             for e in evaders] for p in pursuers])
         return solve([p.name for p in pursuers], [e.name for e in evaders], matrix).support(side)

@@ -237,8 +237,8 @@ def _process_alive(pid: int) -> bool:
 
 def reclaim_dead_trials(study: optuna.Study) -> list[int]:
     """Fail the study's running trials whose worker ran on this machine and is gone (killed, or the machine
-    restarted), and queue each again once (as Optuna does for a trial whose heartbeat stopped, without waiting out
-    its grace period); returns their numbers. Trials run elsewhere wait for their heartbeat's grace period."""
+    restarted), and queue each again (as Optuna does for a trial whose heartbeat stopped, at most twice per trial,
+    without waiting out its grace period); returns their numbers. Trials run elsewhere wait for their heartbeat's grace period."""
     host, reclaimed = socket.gethostname(), []
     retry = optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
     for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):

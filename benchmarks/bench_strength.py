@@ -75,7 +75,6 @@ import dataclasses
 import json
 import os
 import re
-import shutil
 import sys
 from pathlib import Path
 
@@ -88,15 +87,14 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from pecli.cli.common import one_torch_thread, sigterm_stops  # noqa: E402
 from pecli.experiment.pipeline import changes  # noqa: E402
 from pecli.rl.budget import cpu_through  # noqa: E402
+from pecli.rl.fork import run_cpu_hours  # noqa: E402
 from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
-from pecli.io import atomic_write_json, file_digest  # noqa: E402
+from pecli.io import file_digest  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
-from pecli.policies.registry import BUILTINS  # noqa: E402
 from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.rl.averaging import average_checkpoints  # noqa: E402
-from pecli.rl.pool import OpponentPool  # noqa: E402
 from pecli.rl.handover import AVERAGE_FILE  # noqa: E402
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted, round_of  # noqa: E402
 from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402
@@ -107,14 +105,6 @@ HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league|nash)-s\d+")  # <belief>-<schedule>-s<seed>
 TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
-
-
-def run_cpu_hours(run: Path) -> float:
-    """CPU hours a self-play run has recorded (its finished turns)."""
-    path = run / "selfplay.json"
-    if not path.is_file():
-        return 0.0
-    return sum(t["cpu_seconds"] for t in json.loads(path.read_text())["turns"]) / 3600
 
 
 def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
@@ -582,32 +572,15 @@ def exploit(args: argparse.Namespace) -> None:
 
 
 def fork(args: argparse.Namespace) -> None:
-    """Copy a stopped run to ``--to``, with the scripted players of ``--add`` joining its league pools."""
-    source = args.run
-    target = args.to / source.name
-    state_path = source / STATE_FILE
-    if not state_path.is_file():
-        sys.exit(f"{source}: not a self-play run (no {STATE_FILE})")
-    if target.exists():
-        sys.exit(f"{target} exists: fork to another --to")
-    state = json.loads(state_path.read_text())
-    pools = {role: OpponentPool.from_dict(data) for role, data in state["pools"].items()}
-    for name in args.add:
-        if name not in BUILTINS:
-            sys.exit(f"--add {name}: not a scripted player ({', '.join(BUILTINS)})")
-        for role in BUILTINS[name].roles:
-            try:
-                pools[role].add(name, name, generation=0)
-            except ValueError as error:  # it holds it already
-                sys.exit(f"{source.name}: {error}")
-    args.to.mkdir(parents=True, exist_ok=True)
-    partial = args.to / f".{source.name}.partial"
-    shutil.rmtree(partial, ignore_errors=True)
-    shutil.copytree(source, partial, symlinks=True)
-    atomic_write_json(partial / STATE_FILE, {**state, "pools": {role: pool.to_dict() for role, pool in pools.items()}})
-    partial.rename(target)  # the fork appears whole or not at all
+    """``pecli zoo fork`` (:func:`pecli.rl.fork.fork_run`), kept here for the A/B recipes written with it."""
+    from pecli.rl.fork import fork_run
+
+    try:
+        target = fork_run(args.run, args.to, args.add)
+    except PecliError as error:
+        sys.exit(str(error))
     added = f", with {', '.join(args.add)} in its pools" if args.add else ""
-    print(f"{target}: a copy of {source} at {run_cpu_hours(target):.2f} CPU-h{added}")
+    print(f"{target}: a copy of {args.run} at {run_cpu_hours(target):.2f} CPU-h{added}")
 
 
 def main() -> None:

@@ -38,6 +38,17 @@ class FolderLocked(PecliError):
     """Another process is writing the folder."""
 
 
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` of this machine runs (someone else's counts: it cannot be signalled, but it is there)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def holder(folder: Path) -> int | None:
     """The PID recorded by the process that holds (or last held) ``folder``'s lock, if readable."""
     path = folder / LOCK_FILE

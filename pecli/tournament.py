@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import random
 import signal
@@ -43,7 +42,7 @@ from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.metagame import MetaGame, solve
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, RESUME_DIR, CheckpointMeta, ZooError, checkpoint_problem, read_metadata
+from pecli.zoo import LAST, RESUME_DIR, CheckpointMeta, ZooError, checkpoint_problem, finite_number, read_metadata
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
@@ -323,7 +322,7 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     except (PecliError, TypeError):
         return None
     numbers = (result.episodes, result.captures, result.time_to_capture_mean, result.time_to_capture_std)
-    if not all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in numbers) \
+    if not all(finite_number(x) for x in numbers) \
             or not isinstance(result.episodes, int) or not isinstance(result.captures, int) \
             or not 0 <= result.captures <= result.episodes or result.episodes < 1 \
             or not 0 <= result.time_to_capture_mean <= 1 or not 0 <= result.time_to_capture_std <= 1:

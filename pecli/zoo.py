@@ -382,7 +382,8 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
     return entries
 
 
-def _finite(value: object) -> bool:
+def finite_number(value: object) -> bool:
+    """Whether ``value`` is a finite int or float (a boolean is not), as a record read back must hold."""
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -404,7 +405,7 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
         found = {}
         for rating in ratings:
             if not isinstance(rating, dict) or not isinstance(rating.get("spec"), str) or not rating["spec"] \
-                    or not all(_finite(rating.get(key)) for key in ("elo", "stderr")):
+                    or not all(finite_number(rating.get(key)) for key in ("elo", "stderr")):
                 continue  # not what a tournament writes: a rating of NaN never ranks a checkpoint
             spec = Path(rating["spec"])
             if spec.suffix == ".zip":

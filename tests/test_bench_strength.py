@@ -1,11 +1,11 @@
-"""``benchmarks/bench_strength.py fork``: a stopped run copied whole, with scripted players joining its pools."""
+"""``pecli zoo fork``: a stopped run copied whole, with scripted players joining its pools; and the strength
+report's verdicts (``benchmarks/bench_strength.py``)."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
 import subprocess
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -23,8 +23,14 @@ def load_script() -> ModuleType:
     return module
 
 
-def fork(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, str(SCRIPT), "fork", *args], capture_output=True, text=True, timeout=120)
+def fork(run: str, *args: str):
+    """``pecli zoo fork RUN ...`` in this process: ``returncode``, ``stdout``, ``stderr`` as a subprocess's."""
+    from typer.testing import CliRunner
+
+    from pecli.cli import app
+
+    result = CliRunner().invoke(app, ["zoo", "fork", run, *args])
+    return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
 
 
 def make_run(path: Path) -> dict:
@@ -44,7 +50,7 @@ def make_run(path: Path) -> dict:
 def test_fork_copies_a_run_and_adds_scripted_players_to_its_pools(tmp_path: Path) -> None:
     run = tmp_path / "zoo" / "none-league-s0"
     state = make_run(run)
-    result = fork("--run", str(run), "--to", str(tmp_path / "arm"), "--add", "corner-sitter", "interceptor")
+    result = fork(str(run), "--to", str(tmp_path / "arm"), "--add", "corner-sitter", "--add", "interceptor")
     assert result.returncode == 0, result.stderr
     copy = tmp_path / "arm" / run.name
     assert "0.50 CPU-h" in result.stdout and "corner-sitter, interceptor" in result.stdout
@@ -67,15 +73,15 @@ def test_fork_refuses_with_one_line_and_leaves_nothing(tmp_path: Path) -> None:
     for args, says in ((["--add", "nobody"], "not a scripted player"),
                        (["--add", "greedy"], "already holds 'greedy'"),
                        ([], None)):
-        result = fork("--run", str(run), "--to", str(arm), *args)
+        result = fork(str(run), "--to", str(arm), *args)
         if says is None:
             assert result.returncode == 0, result.stderr
             continue
         assert result.returncode != 0 and says in result.stderr and result.stderr.strip().count("\n") == 0
         assert not (arm / run.name).exists()
-    again = fork("--run", str(run), "--to", str(arm))
+    again = fork(str(run), "--to", str(arm))
     assert again.returncode != 0 and "exists" in again.stderr
-    missing = fork("--run", str(tmp_path / "zoo"), "--to", str(arm))
+    missing = fork(str(tmp_path / "zoo"), "--to", str(arm))
     assert missing.returncode != 0 and "not a self-play run" in missing.stderr
 
 

@@ -200,3 +200,21 @@ def average(
     meta = average_checkpoints(checkpoints, out)
     err_console.print(f"wrote {out}: the mean of {len(checkpoints)} {meta.role} checkpoints "
                       f"({checkpoints[0].name} .. {checkpoints[-1].name})", highlight=False)
+
+
+@app.command("fork")
+@user_errors
+def fork(
+    run: Annotated[Path, typer.Argument(help="The stopped self-play run to copy.", show_default=False)],
+    to: Annotated[Path, typer.Option("--to", help="The zoo the copy goes into.", show_default=False)],
+    add: Annotated[list[str] | None, typer.Option("--add", help="A scripted player that joins the copy's pools "
+                                                  "(repeat for several).")] = None,
+) -> None:
+    """Copy a stopped self-play run whole into another zoo, to train on as one arm of an A/B (the original trained
+    on is the control). [bold]--add[/] puts scripted players into its pools, as the ones a run starts with."""
+    from pecli.rl.fork import fork_run, run_cpu_hours
+
+    target = fork_run(run, to, add or [])
+    added = f", with {', '.join(add)} in its pools" if add else ""
+    console.print(f"{target}: a copy of {run} at {run_cpu_hours(target):.2f} CPU-h{added}", highlight=False,
+                  markup=False)

@@ -34,6 +34,7 @@ from pecli.errors import PecliError
 from pecli.experiment.runs import RunProgress, averages_behind, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import atomic_write_json, atomic_write_text, read_json
+from pecli.locks import process_alive
 from pecli.roles import ROLES
 from pecli.scenario import Training, dotted, read_yaml
 
@@ -97,13 +98,7 @@ def driver_alive(state: dict[str, Any]) -> bool:
     driver = state.get("driver") or {}
     if driver.get("host") != socket.gethostname() or not isinstance(driver.get("pid"), int):
         return False
-    try:
-        os.kill(driver["pid"], 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return driver.get("ended") is None
+    return process_alive(driver["pid"]) and driver.get("ended") is None
 
 
 def stage_lines(out: Path, state: dict[str, Any], alive: bool) -> list[str]:

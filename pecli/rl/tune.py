@@ -36,6 +36,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from pecli.errors import PecliError
+from pecli.locks import process_alive
 from pecli.match import play_match
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
@@ -225,16 +226,6 @@ def optimize(worker: Worker) -> None:
     )
 
 
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # someone else's process
-        return True
-    return True
-
-
 def reclaim_dead_trials(study: optuna.Study) -> list[int]:
     """Fail the study's running trials whose worker ran on this machine and is gone (killed, or the machine
     restarted), and queue each again (as Optuna does for a trial whose heartbeat stopped, at most twice per trial,
@@ -245,7 +236,7 @@ def reclaim_dead_trials(study: optuna.Study) -> list[int]:
         worker = trial.user_attrs.get(WORKER_ATTR)
         if not isinstance(worker, dict) or worker.get("host") != host or not isinstance(worker.get("pid"), int):
             continue
-        if worker["pid"] != os.getpid() and _process_alive(worker["pid"]):
+        if worker["pid"] != os.getpid() and process_alive(worker["pid"]):
             continue
         try:
             study._storage.set_trial_state_values(trial._trial_id, optuna.trial.TrialState.FAIL)

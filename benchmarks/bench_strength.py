@@ -521,7 +521,7 @@ def behaviour(args: argparse.Namespace) -> None:
 
 def draw_escapes(recording: Recording, path: Path) -> Path:
     """Draw up to 4 games of ``recording`` that the evader escaped (the first games if it escaped none)."""
-    from pecli.game.render import draw_episodes
+    from pecli.render import draw_episodes
 
     escaped = np.flatnonzero(~recording.captured)
     games = (escaped if len(escaped) else np.arange(len(recording.captured)))[:4]

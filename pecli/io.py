@@ -65,9 +65,9 @@ MAX_RECORD_BYTES = 64 << 20  # a JSON record pecli reads back: results, mixtures
 def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) -> Any:
     """The JSON in ``path``, read as data: :class:`~pecli.errors.PecliError` (one line naming ``what``) if it is
     missing, larger than ``max_bytes``, not JSON or nested too deep to parse."""
-    from pecli.errors import PecliError
-
     import stat
+
+    from pecli.errors import PecliError
 
     path = Path(path)
     try:

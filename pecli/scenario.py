@@ -23,7 +23,14 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 from pydantic.functional_validators import BeforeValidator
 
 from pecli.errors import ConfigError
@@ -318,7 +325,7 @@ class SelfPlay(_Model):
         return self
 
 
-ALGOS = ("td3", "ddpg", "sac", "tqc", "crossq")  # the algorithms of pecli.rl.algorithms
+ALGOS = ("td3", "ddpg", "sac", "tqc", "crossq")  # the algorithms of pecli.models.algorithms
 
 
 class Training(_Model):

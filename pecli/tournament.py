@@ -36,13 +36,21 @@ from pecli.errors import PecliError
 from pecli.io import atomic_write_json, file_digest, read_json
 from pecli.locks import locked
 from pecli.match import play_match
+from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
-from pecli.metagame import MetaGame, solve
 from pecli.stats import Rating, bradley_terry, ties_with_best
-from pecli.zoo import LAST, RESUME_DIR, CheckpointMeta, ZooError, checkpoint_problem, finite_number, read_metadata
+from pecli.zoo import (
+    LAST,
+    RESUME_DIR,
+    CheckpointMeta,
+    ZooError,
+    checkpoint_problem,
+    finite_number,
+    read_metadata,
+)
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 

@@ -65,7 +65,7 @@ class CheckpointMeta:
     role: Role
     steps: int  # learner transitions trained on
     episodes: int  # episodes finished while training
-    algo: str  # a name of pecli.rl.algorithms.ALGORITHMS: td3 | ddpg | ...
+    algo: str  # a name of pecli.models.algorithms.ALGORITHMS: td3 | ddpg | ...
     belief: str  # none | bimdn | ...
     scenario: str  # scenario name
     scenario_hash: str  # Scenario.fingerprint(): a checkpoint only plays the game it learned
@@ -81,7 +81,7 @@ class CheckpointMeta:
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
-    policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.rl.algorithms.policy_kwargs: rebuilds the network
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.models.algorithms.policy_kwargs: rebuilds the network
     belief_kwargs: dict[str, Any] | None = None  # the actor's BeliefModel arguments, with a belief
     averaged: list[str] = field(default_factory=list)  # pecli zoo average: the checkpoints it is the mean of
     pecli_version: str = __version__

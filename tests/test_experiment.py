@@ -211,7 +211,7 @@ def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
 
 
 def test_an_edited_scenario_under_an_experiment_is_refused(tmp_path: Path) -> None:
-    from pecli.experiment.pipeline import SCENARIO_FILE
+    from pecli.experiment.folder import SCENARIO_FILE
     from pecli.scenario import builtin_config_dir
 
     game = tmp_path / "game.yaml"
@@ -375,7 +375,7 @@ class InlineCluster:
 def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_path: Path) -> None:
     """A run of 2 rounds whose first round passes the pause's budget stops there, paused, and nothing is ranked;
     called again without the pause, the same run trains its second round."""
-    from pecli.experiment.pipeline import stage_lines
+    from pecli.experiment.folder import stage_lines
 
     data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
             "runs": {**SMOKE["runs"], "rounds": 2}}
@@ -573,7 +573,7 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
 
 
 def test_status_counts_the_pairings_a_stopped_stage_has_played(tmp_path: Path) -> None:
-    from pecli.experiment.pipeline import stage_lines
+    from pecli.experiment.folder import stage_lines
 
     state = {"stages": {"ranking": {"pairings": 5, "status": "done"},
                         "tournament": {"pairings": 4, "status": "running"}}}

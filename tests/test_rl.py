@@ -12,7 +12,7 @@ from stable_baselines3 import DDPG, TD3
 from pecli.game import Game
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
-from pecli.rl.policies import CentralCriticPolicy
+from pecli.models.policies import CentralCriticPolicy
 from pecli.rl.train import TrainJob, make_model, with_overrides
 from pecli.scenario import Scenario
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
@@ -114,7 +114,7 @@ def test_a_learned_policy_plays_exactly_as_in_its_training_view(quick: Scenario)
 
 def test_unknown_algorithm_is_refused() -> None:
     from pecli.errors import PolicyError
-    from pecli.rl.algorithms import get_algorithm
+    from pecli.models.algorithms import get_algorithm
 
     with pytest.raises(PolicyError, match="unknown algorithm 'ppo'"):
         get_algorithm("ppo")

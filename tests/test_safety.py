@@ -345,7 +345,7 @@ def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(zoo: Path
 def test_weights_that_unpack_beyond_the_limit_are_not_read(zoo: Path, tmp_path: Path, quick: Scenario,
                                                            monkeypatch) -> None:
     from pecli.errors import PolicyError
-    from pecli.rl import checkpoint
+    from pecli.models import checkpoint
 
     monkeypatch.setattr(checkpoint, "MAX_WEIGHTS_BYTES", 1000)  # a zip bomb's member, at a test's size
     with pytest.raises(PolicyError, match="unpack to more than 1,000 bytes"):

@@ -117,7 +117,7 @@ def test_a_round_stopped_inside_resumes_there_the_same_way_twice(quick: Scenario
 
 
 def _policy(path: Path) -> list[th.Tensor]:
-    from pecli.rl.checkpoint import read_weights
+    from pecli.models.checkpoint import read_weights
 
     return list(read_weights(path)[0]["policy"].values())
 

@@ -249,7 +249,7 @@ def test_the_best_evaluation_depends_on_the_role(tmp_path: Path, maximise: bool,
 
 def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
     """Training is bit-reproducible on one thread: the same command twice gives the same networks."""
-    from pecli.rl.checkpoint import read_weights
+    from pecli.models.checkpoint import read_weights
 
     for zoo in ("a", "b"):
         assert train(tmp_path / zoo, "--steps", "600").exit_code == 0

@@ -11,9 +11,21 @@ import typer
 import typer.rich_utils
 
 from pecli import __version__
+from pecli.cli import (
+    config,
+    experiment,
+    exploit,
+    export,
+    hj,
+    play,
+    selfplay,
+    tournament,
+    train,
+    tune,
+    zoo,
+)
 from pecli.cli.common import err_console
 from pecli.trust import TRUST_VARIABLE
-from pecli.cli import config, experiment, exploit, export, hj, play, selfplay, tournament, train, tune, zoo
 
 app = typer.Typer(
     name="pecli",

@@ -18,7 +18,7 @@ from pecli.locks import locked
 from pecli.scenario import builtin_experiments
 
 if TYPE_CHECKING:
-    from pecli.experiment.pipeline import RunStatus
+    from pecli.experiment.folder import RunStatus
 
 app = typer.Typer(
     help="Reproduce the paper's tables with one command: a grid of runs, the paper's ranking, the final "
@@ -192,7 +192,13 @@ def show(
 @user_errors
 def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
     """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
-    from pecli.experiment.pipeline import driver_alive, open_experiment, read_state, stage_lines, statuses
+    from pecli.experiment.folder import (
+        driver_alive,
+        open_experiment,
+        read_state,
+        stage_lines,
+        statuses,
+    )
 
     loaded = open_experiment(out)
     state = read_state(out)

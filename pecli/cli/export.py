@@ -9,7 +9,13 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from pecli.cli.common import console, err_console, one_torch_thread, require_positive, user_errors
+from pecli.cli.common import (
+    console,
+    err_console,
+    one_torch_thread,
+    require_positive,
+    user_errors,
+)
 from pecli.errors import PecliError
 
 app = typer.Typer(

@@ -96,7 +96,7 @@ def play(
         console.print(table)
 
     if render is not None and recording is not None:
-        from pecli.game.render import animate_episode, draw_episodes
+        from pecli.render import animate_episode, draw_episodes
 
         if render.suffix.lower() == ".gif":
             animate_episode(recording, render)

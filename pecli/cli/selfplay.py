@@ -9,7 +9,13 @@ from typing import Annotated
 
 import typer
 
-from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
+from pecli.cli.common import (
+    TrainConfigOption,
+    err_console,
+    resumed_scenario,
+    sigterm_stops,
+    user_errors,
+)
 from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
 from pecli.errors import PecliError
 from pecli.rl.budget import MAX_CPU_HOURS
@@ -83,9 +89,15 @@ def selfplay(
     [bold]--resume[/] continues from its newest checkpoint. Settings: the config's
     [bold]training.selfplay[/] section.
     """
-    from pecli.rl.algorithms import torch_device
+    from pecli.models.algorithms import torch_device
     from pecli.rl.handover import averaged_from
-    from pecli.rl.selfplay import KEEP, SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
+    from pecli.rl.selfplay import (
+        KEEP,
+        SelfPlay,
+        SelfPlayInterrupted,
+        SelfPlayJob,
+        read_state,
+    )
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
     from pecli.zoo import Run
 

@@ -9,11 +9,26 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
-from pecli.cli.common import console, err_console, one_torch_thread, require_batch, require_positive, scenario_for, sigterm_stops, user_errors
+from pecli.cli.common import (
+    console,
+    err_console,
+    one_torch_thread,
+    require_batch,
+    require_positive,
+    scenario_for,
+    sigterm_stops,
+    user_errors,
+)
 from pecli.errors import PecliError
-
 
 
 @user_errors
@@ -58,7 +73,14 @@ def tournament(
     [bold]--resume[/] reuses.
     """
     from pecli.locks import locked
-    from pecli.reports import nash_record, nash_table, ratings_table, results_table, write_nash, write_reports
+    from pecli.reports import (
+        nash_record,
+        nash_table,
+        ratings_table,
+        results_table,
+        write_nash,
+        write_reports,
+    )
     from pecli.tournament import find_players, run_tournament, schedule
 
     require_batch(episodes, "add --seeds instead")

@@ -9,8 +9,14 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
-from pecli.cli.common import TrainConfigOption, err_console, resumed_scenario, sigterm_stops, user_errors
 from pecli.belief import BELIEF_KINDS
+from pecli.cli.common import (
+    TrainConfigOption,
+    err_console,
+    resumed_scenario,
+    sigterm_stops,
+    user_errors,
+)
 from pecli.errors import PecliError
 from pecli.scenario import ALGOS, load_scenario
 
@@ -62,7 +68,8 @@ def train(
     continues it from its newest checkpoint, replay buffer included.
     TensorBoard logs are in zoo/<run>/tb.
     """
-    from pecli.rl.algorithms import torch_device
+    from pecli.models.algorithms import torch_device
+    from pecli.policies.registry import recorded_policy
     from pecli.rl.train import (
         DEFAULT_OPPONENT,
         TrainingInterrupted,
@@ -72,7 +79,6 @@ def train(
         with_overrides,
     )
     from pecli.rl.train import train as run_training
-    from pecli.policies.registry import recorded_policy
     from pecli.zoo import JOB_FILE, Run
 
     role_name = role.value

@@ -8,7 +8,13 @@ from typing import Annotated, Any
 
 import typer
 
-from pecli.cli.common import TrainConfigOption, console, err_console, sigterm_stops, user_errors
+from pecli.cli.common import (
+    TrainConfigOption,
+    console,
+    err_console,
+    sigterm_stops,
+    user_errors,
+)
 from pecli.cli.train import AlgoChoice, DeviceOption
 from pecli.errors import PecliError
 
@@ -35,10 +41,18 @@ StorageOption = Annotated[str | None, typer.Option("--storage", help="Any Optuna
 
 
 def _tune(what: str, **options: Any) -> None:
-    from pecli.rl.algorithms import torch_device
+    from pecli.models.algorithms import torch_device
     from pecli.rl.search_space import load_space
     from pecli.rl.train import DEFAULT_OPPONENT
-    from pecli.rl.tune import TuneSettings, Worker, load_study, new_study, run_workers, sqlite_url, stored_settings
+    from pecli.rl.tune import (
+        TuneSettings,
+        Worker,
+        load_study,
+        new_study,
+        run_workers,
+        sqlite_url,
+        stored_settings,
+    )
     from pecli.rl.tune_report import write_report
     from pecli.scenario import load_scenario
 

@@ -81,7 +81,7 @@ def _check_network(checkpoint: Path, meta: CheckpointMeta) -> None:
         err_console.print(f"note: the scenario of {checkpoint} ('{meta.scenario}') is not at hand; its network was "
                           "not checked", highlight=False)
         return
-    from pecli.rl.checkpoint import load_policy
+    from pecli.models.checkpoint import load_policy
 
     load_policy(checkpoint, meta, scenario)  # ZooError: one line naming the first difference
 
@@ -140,7 +140,12 @@ def best(
 
     A rated checkpoint that is gone, damaged or without its metadata is passed over (with a warning).
     """
-    from pecli.zoo import ZooError, checkpoint_problem, read_metadata, tournament_ratings
+    from pecli.zoo import (
+        ZooError,
+        checkpoint_problem,
+        read_metadata,
+        tournament_ratings,
+    )
 
     if role not in ("pursuer", "evader"):
         raise PecliError(f"role must be pursuer or evader, not '{role}'")

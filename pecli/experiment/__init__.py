@@ -8,8 +8,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from pecli.experiment.pipeline import ExperimentRunner, open_experiment
-from pecli.experiment.spec import Experiment, LoadedExperiment, RunSpec, builtin_experiments, load_experiment
+from pecli.experiment.folder import open_experiment
+from pecli.experiment.pipeline import ExperimentRunner
+from pecli.experiment.spec import (
+    Experiment,
+    LoadedExperiment,
+    RunSpec,
+    builtin_experiments,
+    load_experiment,
+)
 
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster

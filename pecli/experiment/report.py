@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pecli.errors import PecliError
-from pecli.experiment.pipeline import KEPT_FILE, open_experiment
+from pecli.experiment.folder import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve

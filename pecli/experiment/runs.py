@@ -21,7 +21,8 @@ from pecli.errors import PecliError
 from pecli.experiment.spec import RunSpec
 from pecli.io import read_json
 from pecli.rl.budget import budget_reached, whole_rounds
-from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE, stale_averages
+from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE
+from pecli.rl.handover import stale_averages
 from pecli.zoo import FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON

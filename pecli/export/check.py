@@ -15,8 +15,8 @@ import numpy as np
 from pecli.game import Game
 from pecli.match import policy_seeds
 from pecli.policies.base import Policy
-from pecli.policies.registry import resolve_policy
 from pecli.policies.exported import ExportedPolicy
+from pecli.policies.registry import resolve_policy
 from pecli.roles import ROLES, opponent_of
 from pecli.scenario import Scenario
 

@@ -34,7 +34,7 @@ from pecli.belief.model import BeliefModel
 from pecli.export.beliefs import belief_module
 from pecli.export.encoder import SIEncoder
 from pecli.game.si import SILayout
-from pecli.rl.algorithms import deterministic_actor
+from pecli.models.algorithms import deterministic_actor
 
 DEFAULT_OPSET = 17
 MIN_OPSET = 13  # the lowest opset every belief kind's operators export to and load back from
@@ -60,7 +60,7 @@ class PolicyGraph(nn.Module):
 
     Args:
         actor: the SB3 actor (its ``features_extractor`` holds the belief, if any; its deterministic action is
-            :func:`pecli.rl.algorithms.deterministic_actor`), on the CPU.
+            :func:`pecli.models.algorithms.deterministic_actor`), on the CPU.
         layout: the SI row layout of the player's role and scenario.
     """
 

@@ -2,7 +2,14 @@
 
 from pecli.policies.base import HeuristicPolicy, Policy
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
-from pecli.policies.registry import BUILTINS, builtin_names, register_family, register_loader, resolve_policy, stored_scenario
+from pecli.policies.registry import (
+    BUILTINS,
+    builtin_names,
+    register_family,
+    register_loader,
+    resolve_policy,
+    stored_scenario,
+)
 
 __all__ = [
     "BUILTINS",

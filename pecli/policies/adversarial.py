@@ -38,7 +38,12 @@ import numpy as np
 
 from pecli.game.observation import Decoded
 from pecli.policies.base import HeuristicPolicy
-from pecli.policies.control import full_speed_along, pure_pursuit_steering, speed_command, velocity_command
+from pecli.policies.control import (
+    full_speed_along,
+    pure_pursuit_steering,
+    speed_command,
+    velocity_command,
+)
 from pecli.scenario import CarAgent
 
 LOST_STEPS = 30  # interceptor: steps it drives to where a lost evader should be before sweeping

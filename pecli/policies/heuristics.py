@@ -10,7 +10,12 @@ import numpy as np
 
 from pecli.game.observation import Decoded
 from pecli.policies.base import HeuristicPolicy
-from pecli.policies.control import full_speed_along, pure_pursuit_steering, speed_command, velocity_command
+from pecli.policies.control import (
+    full_speed_along,
+    pure_pursuit_steering,
+    speed_command,
+    velocity_command,
+)
 from pecli.scenario import CarAgent
 
 SEARCH_STEPS = 25  # pure pursuit: steps of full-lock search after losing sight of the evader

@@ -332,7 +332,9 @@ def _load_once(path: Path, mtime_ns: int, size: int) -> Solution:
 
 def _belief_policy(path: str, role: Role, scenario: Scenario) -> Any:
     """A learned checkpoint of ``role`` with a belief, loaded for its belief."""
-    from pecli.policies.learned import LearnedPolicy  # torch loads only when a belief is asked for
+    from pecli.policies.learned import (
+        LearnedPolicy,  # torch loads only when a belief is asked for
+    )
 
     policy = LearnedPolicy.load(path, role, scenario)
     if policy.meta.belief == "none":

@@ -46,7 +46,7 @@ class LearnedPolicy(WindowedPolicy):
         )
         self.actor = actor
         self.meta = meta
-        from pecli.rl.algorithms import deterministic_actor
+        from pecli.models.algorithms import deterministic_actor
 
         actor.train(False)  # batch (re)normalisation layers (CrossQ) play with their running statistics
         self._act = deterministic_actor(actor)
@@ -64,7 +64,9 @@ class LearnedPolicy(WindowedPolicy):
         if meta.scenario_hash != scenario.fingerprint():
             raise PolicyError(f"{path} was trained on {_scenario_mismatch(path, meta, scenario)}: "
                               "pass the config it was trained with")
-        from pecli.rl.checkpoint import load_policy  # SB3 and the networks load only when a checkpoint is asked for
+        from pecli.models.checkpoint import (
+            load_policy,  # SB3 and the networks load only when a checkpoint is asked for
+        )
 
         try:
             policy = load_policy(path, meta, scenario)

@@ -12,6 +12,7 @@ folder); a ``module:Class`` member is imported only with ``--trust``, and a mixt
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -72,33 +73,12 @@ def read_nash(path: Path) -> NashRecord:
         raise PolicyError(f"{path}: not a Nash mixture ({where}: {first['msg']})") from None
 
 
-def _member_spec(spec: str, folder: Path) -> str:
-    """A member's policy string, a relative file read from ``folder``; refuses what a data file may not name."""
-    from pecli.policies.registry import BUILTINS, family_of
-    from pecli.trust import trusted
+def load_nash_policy(options: str, role: Role, scenario: Scenario, member: Callable[[str, Path], Policy]) -> Policy:
+    """The ``nash:`` family: ``role``'s side of the mixture in ``options`` (a folder or its ``nash.json``).
 
-    if spec in BUILTINS:
-        return spec
-    if family_of(spec) == "nash":
-        raise PolicyError(f"{spec}: a Nash mixture does not nest another")
-    if family_of(spec) is not None:  # hj: an HJ player, whose solution is read as data
-        return spec
-    path = Path(spec)
-    if path.suffix.lower() in (".zip", ".onnx", ".npz"):
-        member = path if path.is_absolute() else folder / path
-        if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
-            raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
-        return str(member)
-    if not trusted():
-        raise PolicyError(f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
-                          "no code a file names unless you pass `pecli --trust`")
-    return spec
-
-
-def load_nash_policy(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    """The ``nash:`` family: ``role``'s side of the mixture in ``options`` (a folder or its ``nash.json``)."""
+    ``member(spec, folder)`` plays one member's policy string, a relative file read from ``folder``.
+    """
     from pecli.policies.mixed import MixedPolicy
-    from pecli.policies.registry import resolve_policy
 
     if not options.strip():
         raise PolicyError("nash: needs the folder of a tournament run with --nash, e.g. nash:runs/tournament")
@@ -112,7 +92,7 @@ def load_nash_policy(options: str, role: Role, scenario: Scenario, seed: int | N
         raise PolicyError(f"{path}: its {role} mixture has no member of positive weight")
     from pecli.io import file_digest
 
-    policies = [resolve_policy(_member_spec(m.spec, path.parent), role, scenario, seed=seed) for m in members]
+    policies = [member(m.spec, path.parent) for m in members]
     mixture = MixedPolicy(role, policies, [m.name for m in members], [m.weight for m in members])
     mixture.identity = f"nash:{file_digest(path)}"  # what a tournament's cache knows it by: the mixture's content
     return mixture

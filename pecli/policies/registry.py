@@ -24,8 +24,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pecli.errors import PecliError, PolicyError
+from pecli.policies.adversarial import (
+    Blindside,
+    Circler,
+    CornerSitter,
+    Hider,
+    Interceptor,
+    WallRunner,
+)
 from pecli.policies.base import HeuristicPolicy, Policy
-from pecli.policies.adversarial import Blindside, Circler, CornerSitter, Hider, Interceptor, WallRunner
 from pecli.policies.heuristics import Greedy, PurePursuit, RandomWalk, Rash
 from pecli.roles import Role
 from pecli.scenario import Scenario
@@ -40,19 +47,25 @@ Loader = Callable[[Path, Role, Scenario, "int | None"], Policy]
 
 
 def _load_checkpoint(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.learned import LearnedPolicy  # torch and SB3 load only when a checkpoint is asked for
+    from pecli.policies.learned import (
+        LearnedPolicy,  # torch and SB3 load only when a checkpoint is asked for
+    )
 
     return LearnedPolicy.load(path, role, scenario, seed)
 
 
 def _load_exported(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.exported import ExportedPolicy  # onnxruntime loads only when an export is asked for
+    from pecli.policies.exported import (
+        ExportedPolicy,  # onnxruntime loads only when an export is asked for
+    )
 
     return ExportedPolicy.load(path, role, scenario, seed)
 
 
 def _load_hj(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.hj import load_hj_policy  # the HJ solver's modules load only when asked for
+    from pecli.policies.hj import (
+        load_hj_policy,  # the HJ solver's modules load only when asked for
+    )
 
     return load_hj_policy(options, role, scenario, seed)
 
@@ -62,9 +75,36 @@ def _load_hj_file(path: Path, role: Role, scenario: Scenario, seed: int | None) 
 
 
 def _load_nash(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.nash import load_nash_policy  # a zoo's Nash mixture (pecli tournament --nash)
+    from pecli.policies.nash import (
+        load_nash_policy,  # a zoo's Nash mixture (pecli tournament --nash)
+    )
 
-    return load_nash_policy(options, role, scenario, seed)
+    def member(spec: str, folder: Path) -> Policy:
+        return resolve_policy(_nash_member(spec, folder), role, scenario, seed=seed)
+
+    return load_nash_policy(options, role, scenario, member)
+
+
+def _nash_member(spec: str, folder: Path) -> str:
+    """A member's policy string, a relative file read from ``folder``; refuses what a data file may not name."""
+    from pecli.trust import trusted
+
+    if spec in BUILTINS:
+        return spec
+    if family_of(spec) == "nash":
+        raise PolicyError(f"{spec}: a Nash mixture does not nest another")
+    if family_of(spec) is not None:  # hj: an HJ player, whose solution is read as data
+        return spec
+    path = Path(spec)
+    if path.suffix.lower() in (".zip", ".onnx", ".npz"):
+        member = path if path.is_absolute() else folder / path
+        if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
+            raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
+        return str(member)
+    if not trusted():
+        raise PolicyError(f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
+                          "no code a file names unless you pass `pecli --trust`")
+    return spec
 
 
 _LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported, ".npz": _load_hj_file}

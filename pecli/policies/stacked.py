@@ -25,9 +25,9 @@ import torch as th
 from torch import nn
 
 from pecli.belief.bimdn import BiMDN
+from pecli.models.algorithms import deterministic_actor
+from pecli.models.extractors import BeliefExtractor, KeysExtractor
 from pecli.policies.learned import LearnedPolicy
-from pecli.rl.algorithms import deterministic_actor
-from pecli.rl.extractors import BeliefExtractor, KeysExtractor
 
 # how many members must decide in one step for deciding together to be cheaper than one by one (one CPU core,
 # benchmarks/bench_opponents.py): below it, they decide on their own

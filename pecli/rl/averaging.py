@@ -20,7 +20,7 @@ from pathlib import Path
 import torch as th
 
 from pecli.io import atomic_path, atomic_write_json
-from pecli.rl.checkpoint import read_weights
+from pecli.models.checkpoint import read_weights
 from pecli.zoo import CheckpointMeta, ZooError, metadata_path, read_metadata
 
 SAME_NETWORK = ("role", "algo", "belief", "scenario_hash", "frame_skip", "frame_stack", "history_length",

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from pecli.belief.model import BeliefModel
+from pecli.models.extractors import belief_observation_space
 from pecli.roles import Role
 from pecli.scenario import BeliefSettings
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
@@ -55,14 +55,6 @@ class BeliefBuffer:
     def sample(self, batch: int) -> tuple[th.Tensor, th.Tensor, np.ndarray]:
         index = self.rng.integers(0, self.size, size=batch)
         return th.as_tensor(self.history[index]), th.as_tensor(self.target[index]), self.unseen[index]
-
-
-def belief_observation_space(view: spaces.Dict, features_dim: int) -> spaces.Dict:
-    """The view's space with its ``history`` window replaced by ``belief`` features, as the replay buffer stores it."""
-    space = dict(view.spaces)
-    del space["history"]
-    space = {"obs": space["obs"], "belief": spaces.Box(-np.inf, np.inf, (features_dim,), np.float32), **space}
-    return spaces.Dict(space)
 
 
 class BeliefVecEnv(VecEnvWrapper):

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import torch as th
 from rich.console import Group
-from rich.markup import escape
 from rich.live import Live
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from stable_baselines3.common.callbacks import BaseCallback

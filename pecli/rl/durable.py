@@ -34,7 +34,7 @@ import torch as th
 
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, read_json
-from pecli.rl.buffers import end_episodes
+from pecli.models.buffers import end_episodes
 from pecli.trust import untrusted
 from pecli.zoo import ZooError
 
@@ -142,7 +142,7 @@ def _write_chunk(directory: Path, prefix: str, arrays: dict[str, np.ndarray], ri
     """``ring`` after writing the rows ``[ring.added - 1, added)`` (at most the last ``capacity``) to a new file.
 
     The previous file's last row is written again: a learner that abandons its games marks it as an
-    episode end after that file was written (:func:`pecli.rl.buffers.end_episodes`)."""
+    episode end after that file was written (:func:`pecli.models.buffers.end_episodes`)."""
     kept = [c for c in ring.chunks if c.end > added - ring.capacity]  # files with a row not yet overwritten
     if added <= ring.added:
         return Ring(ring.capacity, added, kept)
@@ -219,7 +219,7 @@ class DurableState:
     def restore(self, record: Record, model: Any, fit: Any = None) -> None:
         """Load the committed ``record`` (from :meth:`read`) into ``model``, built like the run's model
         (:func:`~pecli.rl.train.make_model` from the run's config), and into ``fit``."""
-        from pecli.rl.checkpoint import load_tensors, restore_model
+        from pecli.models.checkpoint import load_tensors, restore_model
 
         self._collect_garbage(record)
         restore_model(model, self.directory / record.model)

@@ -42,13 +42,13 @@ from pecli.errors import PecliError
 from pecli.io import atomic_write_json, read_json
 from pecli.match import play_match
 from pecli.metagame import solve
+from pecli.models.buffers import end_episodes
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import builtin_names, recorded_policy
 from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints
-from pecli.rl.buffers import end_episodes
 from pecli.rl.callbacks import (
     CurriculumCallback,
     EpisodeStats,
@@ -58,11 +58,17 @@ from pecli.rl.callbacks import (
     RoundDisplay,
     every_episodes,
 )
-from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN, OpponentPool, predicted_win_rate
-from pecli.rl.simultaneous import learn_simultaneously
 from pecli.rl.durable import DurableState
 from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
-from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, play_live, resume_seed
+from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN, OpponentPool, predicted_win_rate
+from pecli.rl.simultaneous import learn_simultaneously
+from pecli.rl.train import (
+    TrainJob,
+    checkpoint_meta,
+    make_learner,
+    play_live,
+    resume_seed,
+)
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.zoo import RESUME_DIR, Run, tournament_ratings

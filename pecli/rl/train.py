@@ -18,15 +18,23 @@ import torch as th
 import yaml
 from stable_baselines3.common.callbacks import CallbackList
 
+from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.errors import PecliError
 from pecli.io import atomic_write_text
 from pecli.match import play_match
+from pecli.models.algorithms import (
+    algorithm_kwargs,
+    get_algorithm,
+    optimizer_kwargs,
+    policy_kwargs,
+    torch_device,
+)
+from pecli.models.checkpoint import restore_model
+from pecli.models.extractors import BeliefExtractor
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.learned import LearnedPolicy
-from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
-from pecli.rl.durable import DurableState
 from pecli.rl.callbacks import (
     CpuBudget,
     CurriculumCallback,
@@ -36,9 +44,7 @@ from pecli.rl.callbacks import (
     ProgressDisplay,
     every_episodes,
 )
-from pecli.rl.checkpoint import restore_model
-from pecli.rl.extractors import BeliefExtractor
-from pecli.rl.algorithms import algorithm_kwargs, get_algorithm, optimizer_kwargs, policy_kwargs, torch_device
+from pecli.rl.durable import DurableState
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name

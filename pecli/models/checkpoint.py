@@ -27,9 +27,8 @@ from stable_baselines3.common.policies import BasePolicy
 
 from pecli.belief.model import features_dim
 from pecli.game import Game
-from pecli.rl.algorithms import get_algorithm
-from pecli.rl.belief import belief_observation_space
-from pecli.rl.extractors import BeliefExtractor
+from pecli.models.algorithms import get_algorithm
+from pecli.models.extractors import BeliefExtractor, belief_observation_space
 from pecli.scenario import MAX_BATCH, MAX_DEPTH, MAX_WIDTH, Scenario
 from pecli.trust import trusted, untrusted
 from pecli.zoo import CheckpointMeta, ZooError

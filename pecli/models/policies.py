@@ -21,7 +21,7 @@ from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import TD3Policy
 
-from pecli.rl.extractors import ACTOR_KEYS, CRITIC_KEYS, KeysExtractor
+from pecli.models.extractors import ACTOR_KEYS, CRITIC_KEYS, KeysExtractor
 
 
 class CentralCritic:

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from math import prod
 from typing import Any
 
+import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
@@ -54,3 +55,11 @@ class BeliefExtractor(BaseFeaturesExtractor):
             draws = (observations["uniform"], observations["normal"]) if "uniform" in observations else None
             features = self.belief.features(observations["history"], draws)
         return th.cat([observations["obs"], features], dim=1)
+
+
+def belief_observation_space(view: spaces.Dict, features_dim: int) -> spaces.Dict:
+    """The view's space with its ``history`` window replaced by ``belief`` features, as the replay buffer stores it."""
+    space = dict(view.spaces)
+    del space["history"]
+    space = {"obs": space["obs"], "belief": spaces.Box(-np.inf, np.inf, (features_dim,), np.float32), **space}
+    return spaces.Dict(space)

@@ -27,8 +27,8 @@ from stable_baselines3.common.noise import NormalActionNoise
 from torch import nn
 
 from pecli.errors import PecliError, PolicyError
-from pecli.rl.buffers import ConcatDictReplayBuffer, NStepDictReplayBuffer
-from pecli.rl.policies import (
+from pecli.models.buffers import ConcatDictReplayBuffer, NStepDictReplayBuffer
+from pecli.models.policies import (
     CentralCriticCrossQPolicy,
     CentralCriticPolicy,
     CentralCriticSACPolicy,

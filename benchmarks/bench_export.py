@@ -82,8 +82,8 @@ def timed(call, ticks: int, frame_skip: int) -> list[float]:
 
 def measure(kind: str, config: str, decisions: int, rounds: int, zoo: Path) -> dict[str, object]:
     from pecli.game.si import SILayout
-    from pecli.policies import resolve_policy
     from pecli.models.algorithms import deterministic_actor
+    from pecli.policies import resolve_policy
     from pecli.runtime import Controller
     from pecli.scenario import load_scenario
 

@@ -85,16 +85,16 @@ from scipy.stats import ttest_ind, ttest_rel
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.cli.common import one_torch_thread, sigterm_stops  # noqa: E402
-from pecli.experiment.pipeline import changes  # noqa: E402
-from pecli.rl.budget import cpu_through  # noqa: E402
-from pecli.rl.fork import run_cpu_hours  # noqa: E402
-from pecli.experiment.runs import execute_run  # noqa: E402
 from pecli.errors import ConfigError, PecliError  # noqa: E402
+from pecli.experiment.pipeline import changes  # noqa: E402
+from pecli.experiment.runs import execute_run  # noqa: E402
+from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.io import file_digest  # noqa: E402
 from pecli.match import Recording, play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
-from pecli.experiment.spec import RunSpec, experiment_from_dict, experiment_path, read_experiment  # noqa: E402
 from pecli.rl.averaging import average_checkpoints  # noqa: E402
+from pecli.rl.budget import cpu_through  # noqa: E402
+from pecli.rl.fork import run_cpu_hours  # noqa: E402
 from pecli.rl.handover import AVERAGE_FILE  # noqa: E402
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted, round_of  # noqa: E402
 from pecli.scenario import Scenario, load_scenario, read_yaml  # noqa: E402

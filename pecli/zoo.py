@@ -32,7 +32,7 @@ import sys
 import tempfile
 import weakref
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
 
@@ -85,7 +85,7 @@ class CheckpointMeta:
     belief_kwargs: dict[str, Any] | None = None  # the actor's BeliefModel arguments, with a belief
     averaged: list[str] = field(default_factory=list)  # pecli zoo average: the checkpoints it is the mean of
     pecli_version: str = __version__
-    created: str = field(default_factory=lambda: datetime.now(timezone.utc).isoformat(timespec="seconds"))
+    created: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
 
     def __post_init__(self) -> None:
         """Refuse values that cannot describe a checkpoint (a hand-edited or damaged file): ``ValueError``."""

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import all_scenarios
+
 from pecli.game import Game
 from pecli.policies import resolve_policy
 from pecli.policies.adversarial import Interceptor, WallRunner

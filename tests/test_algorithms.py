@@ -15,10 +15,10 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 from pecli.export import export_checkpoint
-from pecli.policies import resolve_policy
-from pecli.policies.learned import LearnedPolicy
 from pecli.models.algorithms import ALGORITHMS, deterministic_actor, get_algorithm, torch_device
 from pecli.models.buffers import ConcatDictReplayBuffer, TensorDict
+from pecli.policies import resolve_policy
+from pecli.policies.learned import LearnedPolicy
 from pecli.rl.train import TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.runtime import ExportedModel
 from pecli.scenario import ALGOS, Scenario

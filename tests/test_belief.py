@@ -167,8 +167,8 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
     extractor = policy.actor.features_extractor
     assert extractor.belief.kind == "bimdn" and extractor.belief.net.lstm.hidden_size == 16
 
-    from pecli.render import draw_episodes
     from pecli.match import play_match
+    from pecli.render import draw_episodes
 
     result, recording = play_match(scenario, policy, resolve_policy("greedy", "evader", scenario), 4, seed=1, record=2)
     weights, means, stds = recording.beliefs["pursuer"]

@@ -7,8 +7,8 @@ import pytest
 from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 
-from pecli.policies import resolve_policy
 from pecli.models.buffers import NStepDictReplayBuffer, end_episodes
+from pecli.policies import resolve_policy
 from pecli.rl.durable import Ring, _read_chunks, _write_chunk, replay_arrays
 from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
 from pecli.scenario import Scenario

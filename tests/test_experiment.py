@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import hold
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -24,8 +25,6 @@ from pecli.rl.handover import averaged_from
 from pecli.rl.train import with_overrides
 from pecli.scenario import load_scenario
 from pecli.zoo import metadata_path
-
-from conftest import hold
 
 runner = CliRunner()
 
@@ -160,9 +159,9 @@ def test_a_bad_extends_gives_one_line(tmp_path: Path, top: dict, message: str) -
 
 def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path) -> None:
     import torch as th
+    from test_export import make_checkpoint
 
     from pecli.scenario import load_scenario
-    from test_export import make_checkpoint
 
     th.set_num_threads(1)
     other = make_checkpoint(tmp_path / "zoo", load_scenario("point_mass"), "none")  # another game than quick's

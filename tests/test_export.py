@@ -15,25 +15,25 @@ import numpy as np
 import onnx
 import pytest
 import torch as th
+from conftest import all_scenarios
 from typer.testing import CliRunner
 
 from pecli.belief import BELIEF_KINDS
+from pecli.belief.image import GRID, rasterise
 from pecli.belief.mixture import Mixture
+from pecli.belief.ukf import WindowUKF
+from pecli.belief.window import WindowDecoder
 from pecli.cli import app
 from pecli.errors import ExportError, PecliError, PolicyError
 from pecli.export import check_export, export_checkpoint
-from pecli.belief.image import GRID, rasterise
-from pecli.belief.ukf import WindowUKF
-from pecli.belief.window import WindowDecoder
 from pecli.export.beliefs import KalmanWindow, RasterImage
 from pecli.export.encoder import SIEncoder, WindowGeometry
+from pecli.game import Game
 from pecli.game.memory import HistoryWindow
 from pecli.game.observation import ObservationCodec
-from pecli.game import Game
 from pecli.game.si import SILayout
 from pecli.policies import resolve_policy
 from pecli.policies.exported import ExportedPolicy
-from pecli.roles import Role, opponent_of
 from pecli.rl.train import (
     DEFAULT_OPPONENT,
     TrainJob,
@@ -41,12 +41,11 @@ from pecli.rl.train import (
     make_learner,
     with_overrides,
 )
+from pecli.roles import Role, opponent_of
 from pecli.runtime import Controller, ExportedModel, sidecar_path
 from pecli.scenario import Scenario
 from pecli.tournament import find_players, run_tournament, schedule
 from pecli.zoo import Run
-
-from conftest import all_scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

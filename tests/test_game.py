@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import all_scenarios
+
 from pecli.game import Game
 from pecli.game.observation import ObservationCodec
 from pecli.scenario import Scenario

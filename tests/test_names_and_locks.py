@@ -7,6 +7,7 @@ from pathlib import Path
 from unittest import mock
 
 import pytest
+from conftest import hold
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -15,8 +16,6 @@ from pecli.locks import FolderLocked, acquire, locked, release
 from pecli.rl.train import default_run_name
 from pecli.scenario import Scenario
 from pecli.zoo import Run, ZooError, check_run_name
-
-from conftest import hold
 
 runner = CliRunner()
 TINY = ["--set", "learning_starts=4", "--set", "n_envs=2", "--set", "net_arch=[8]", "--set", "buffer_size=100",

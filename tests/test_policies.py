@@ -8,8 +8,8 @@ import textwrap
 
 import numpy as np
 import pytest
-
 from conftest import all_scenarios
+
 from pecli.errors import PolicyError
 from pecli.game import Game
 from pecli.policies import BUILTINS, Policy, resolve_policy

@@ -10,9 +10,9 @@ import torch as th
 from stable_baselines3 import DDPG, TD3
 
 from pecli.game import Game
+from pecli.models.policies import CentralCriticPolicy
 from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
-from pecli.models.policies import CentralCriticPolicy
 from pecli.rl.train import TrainJob, make_model, with_overrides
 from pecli.scenario import Scenario
 from wrappers.frozen_opponent import FrozenOpponentVecEnv

@@ -7,11 +7,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import BUILTINS
 
 from pecli.errors import ConfigError
 from pecli.scenario import builtin_config_dir, load_scenario, parse_angle
-
-from conftest import BUILTINS
 
 
 @pytest.mark.parametrize("name", BUILTINS)

@@ -10,13 +10,12 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest import BUILTINS
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pecli.errors import ConfigError
 from pecli.scenario import MEMORY_LIMIT, Scenario, builtin_names, load_scenario, memory_estimate
-
-from conftest import BUILTINS
 
 # 120 examples keep the suite fast; PECLI_HYPOTHESIS_EXAMPLES=5000 searches harder (docs/reliability.md)
 EXAMPLES = settings(max_examples=int(os.environ.get("PECLI_HYPOTHESIS_EXAMPLES", "120")), deadline=None,

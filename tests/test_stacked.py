@@ -13,8 +13,8 @@ from pecli.policies import resolve_policy
 from pecli.policies.learned import LearnedPolicy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.stacked import WORTH_STACKING, StackedActors
-from pecli.roles import opponent_of
 from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, with_overrides
+from pecli.roles import opponent_of
 from pecli.scenario import Scenario
 
 TINY = {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [32, 32], "n_envs": 6,

@@ -151,8 +151,8 @@ def test_show_refuses_a_zip_that_is_not_a_checkpoint(zoo: Path, tmp_path: Path) 
 
 def test_average_writes_the_mean_of_a_runs_checkpoints(zoo: Path, tmp_path: Path, quick) -> None:
     from pecli.game import Game
-    from pecli.policies import resolve_policy
     from pecli.models.checkpoint import read_weights
+    from pecli.policies import resolve_policy
     from pecli.zoo import read_metadata
 
     trained = zoo / "p" / "pursuer"

@@ -8,7 +8,7 @@ the full scenario. ``docs/export.md`` describes each field.
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -75,7 +75,7 @@ def build_sidecar(
     return {
         "format": FORMAT,
         "pecli_version": __version__,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "opset": opset,
         "role": meta.role,
         "belief": meta.belief,

@@ -76,10 +76,10 @@ class HeuristicPolicy(ABC):
             self.reset(obs.shape[0])
         return np.clip(self._act(self.codec.decode(obs)), -1.0, 1.0)
 
-    def _allocate(self, n: int) -> None:
+    def _allocate(self, n: int) -> None:  # noqa: B027 (a hook: memoryless policies have nothing to allocate)
         """Create the per-game memory for ``n`` games."""
 
-    def _restart(self, mask: np.ndarray) -> None:
+    def _restart(self, mask: np.ndarray) -> None:  # noqa: B027 (a hook)
         """Clear the memory of the games where ``mask`` is true."""
 
     @abstractmethod

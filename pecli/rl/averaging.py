@@ -14,7 +14,7 @@ from __future__ import annotations
 import io
 import zipfile
 from dataclasses import replace
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import torch as th
@@ -67,7 +67,7 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
         for item in source.infolist():
             target.writestr(item, buffer.getvalue() if item.filename == "policy.pth" else source.read(item.filename))
     meta = replace(newest, averaged=[str(path) for path in paths],
-                   created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+                   created=datetime.now(UTC).isoformat(timespec="seconds"))
     atomic_write_json(metadata_path(out), meta.to_dict())
     return meta
 

@@ -23,7 +23,7 @@ maps CPU time to steps), then plays it against the greedy and rash evaders (500 
 With ``--shuffled`` it plays each belief checkpoint once more with its belief features permuted
 across the batch's games at every step: same distribution, but no longer about the actor's own
 game. The capture lost is what the actor takes from its belief. With ``--keep K`` it selects the
-paper's way instead (SPEC §4): every checkpoint within the budget is ranked by its capture rate
+paper's way instead (§V-B): every checkpoint within the budget is ranked by its capture rate
 against greedy on ``--rank-episodes`` (200) episodes (seed 1, not the test episodes), and the best K are tested
 and pooled per seed.
 
@@ -249,7 +249,7 @@ def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep
                  ) -> list[tuple[Path, float]]:
     """The ``keep`` checkpoints of ``found`` that capture most against greedy on ranking episodes (seed 1).
 
-    The paper's selection (SPEC §4), against the run's own opponent. The ranking episodes are not
+    The paper's selection (§V-B), against the run's own opponent. The ranking episodes are not
     the test episodes (seed 0) nor training's evaluations (seed 10 000 + run seed). The pairings are
     cached in ``run/ranking``, so a second call only plays new checkpoints.
     """

@@ -51,7 +51,7 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
     import torch as th
 
     from pecli.policies import resolve_policy
-    from pecli.rl.durable import DurableState, Ring, _write_chunk, replay_arrays
+    from pecli.rl.durable import DurableState, Ring, replay_arrays, write_chunk
     from pecli.rl.train import TrainJob, make_learner, with_overrides
     from pecli.scenario import load_scenario
 
@@ -77,14 +77,14 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
             folder = Path(tmp)
             rows = [("SB3 pickled replay buffer (before)", lambda: model.save_replay_buffer(folder / "buffer.pkl"),
                      folder / "buffer.pkl")]
-            rows.append(("whole replay buffer as arrays", lambda: _write_chunk(
+            rows.append(("whole replay buffer as arrays", lambda: write_chunk(
                 folder / "whole", "replay", replay_arrays(buffer), Ring(buffer.buffer_size), buffer.buffer_size),
                 folder / "whole"))
-            rows.append(("one interval of rows (50 000 transitions)", lambda: _write_chunk(
+            rows.append(("one interval of rows (50 000 transitions)", lambda: write_chunk(
                 folder / "interval", "replay", replay_arrays(buffer), Ring(buffer.buffer_size, 0), interval_rows),
                 folder / "interval"))
             if fit is not None:
-                rows.append(("whole belief buffer as arrays", lambda: _write_chunk(
+                rows.append(("whole belief buffer as arrays", lambda: write_chunk(
                     folder / "belief", "belief", fit.buffer.arrays(), Ring(fit.buffer.capacity), fit.buffer.capacity),
                     folder / "belief"))
             rows.append(("model zip (weights, optimisers)", lambda: model.save(folder / "model.zip"), folder / "model.zip"))

@@ -14,13 +14,13 @@ thread). Peak memory is the largest total of live NumPy/SciPy allocations during
 the process's maximum resident set during the solve. Times are the median of ``--repeats``
 solves for rel4d (one solve for the larger models); "CPU" is the process's CPU time. Accuracy is
 measured on 20 000 random states (relative positions in the arena's middle, |r_i| ≤ 7 m; relative
-velocities within the limits) against the closed form of SPEC §6: the discrete-time one for the
+velocities within the limits) against the closed form of the equal-acceleration game: the discrete-time one for the
 NumPy solver, which plays the game's dt, and the continuous-time one for hj-reachability, which
 solves the PDE. rel6d and abs8d have no closed form (they clip each player's speed; abs8d has
 walls), so they get no accuracy columns.
 
 ``causes``: under full observation (both sensor ranges 30 m), 500 games per pairing (seed 0),
-each row changes one thing of the players issue 19 found weak (rel4d, the default grid, the
+each row changes one thing of the players found weak before (rel4d, the default grid, the
 gradient rule): the grid, the horizon, the model (rel6d keeps each player's speed limit, abs8d the
 walls), the rule that turns the value into inputs. "chase" is the rule those players fell back
 on (full acceleration along the sign of ∂V/∂r of the default rel4d value, per axis: a lead
@@ -182,7 +182,7 @@ def seeing(scenario: Scenario, roles: tuple[str, ...] = ("pursuer", "evader")) -
 
 
 class GradientRule(HJPolicy):
-    """The HJ players before issue 19: per axis, full input along the sign of ∂V/∂v (read where the positions
+    """The first HJ players: per axis, full input along the sign of ∂V/∂v (read where the positions
     will be after this step), and where that gradient is flat (≤ 1e-3 s on both axes) along the sign of ∂V/∂r.
     rel4d and rel6d only (their last axis per half is the relative position)."""
 

@@ -38,18 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 NEUTRAL = Path(tempfile.gettempdir())  # where the subprocesses run: `python -m` puts the working folder first on sys.path
 TINY = ["--set", "learning_starts=50", "--set", "n_envs=2", "--set", "net_arch=[16, 16]", "--set", "buffer_size=500",
         "--set", "batch_size=16", "-q"]
-STALLING = '''
-import time
-import numpy as np
-
-class StallingEvader:
-    role = "evader"
-    def __init__(self, scenario=None, seed=None): pass
-    def reset(self, n, mask=None, seed=None): pass
-    def act(self, obs):
-        time.sleep(600)
-        return np.zeros((len(obs), 2))
-'''
+STALLING = ROOT / "tests" / "stalling.py"  # the policy whose pairing keeps a worker busy until killed
 
 
 @dataclass
@@ -334,7 +323,7 @@ def descendants(pid: int) -> set[int]:
 
 
 def kills(work: Path, env: dict[str, str], tries: int) -> list[Outcome]:
-    (work / "stalling.py").write_text(STALLING)
+    shutil.copy(STALLING, work / "stalling.py")
     outcomes = []
     for signal_name in ("SIGKILL", "SIGTERM"):
         for attempt in range(tries):

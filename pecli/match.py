@@ -10,7 +10,7 @@ Episode ``i`` under seed ``s`` always starts from the same state, whoever plays 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -74,6 +74,46 @@ class Recording:
     captured: np.ndarray  # (r,) bool
     # per role with a belief: weights (T1, r, K), means (T1, r, K, 2), stds (T1, r, K, 2), normalised world frame
     beliefs: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    def games(self, index: np.ndarray | list[int]) -> Recording:
+        """The recording of the games ``index`` only (e.g. those the evader escaped, to draw them)."""
+        index = np.asarray(index, dtype=int)
+        return replace(
+            self, pursuer=self.pursuer[:, index], evader=self.evader[:, index],
+            seen_by_pursuer=self.seen_by_pursuer[:, index], seen_by_evader=self.seen_by_evader[:, index],
+            steps=self.steps[index], captured=self.captured[index],
+            beliefs={role: tuple(part[:, index] for part in parts) for role, parts in self.beliefs.items()})
+
+
+@dataclass(frozen=True)
+class Behaviour:
+    """How the evader of a recording played, averaged over the steps its games lasted: to tell a lost search (the
+    pursuer rarely sees it) from a lost chase (seen, yet it gets away). Speeds in m per step, distances in m."""
+
+    caught: float  # share of games the pursuer won
+    seen: float  # share of steps the pursuer saw the evader
+    sees: float  # share of steps the evader saw the pursuer
+    speed_unseen: float  # how fast the evader moved while it did not see the pursuer
+    speed_seeing: float  # and while it saw it
+    distance: float  # between the two
+    wall: float  # from the evader to the nearest wall
+
+    @classmethod
+    def of(cls, recording: Recording) -> Behaviour:
+        evader, pursuer = recording.evader[..., :2], recording.pursuer[..., :2]
+        alive = np.arange(len(evader))[:, None] < recording.steps[None, :]  # (T1, r): the steps each game ran
+        moved = alive[1:]
+        speed = np.linalg.norm(np.diff(evader, axis=0), axis=2)
+        sees = recording.seen_by_evader[1:]
+        wall = np.min(np.asarray(recording.scenario.arena.half) - np.abs(evader), axis=2)
+
+        def mean(values: np.ndarray) -> float:
+            return float(values.mean()) if values.size else float("nan")
+
+        return cls(caught=mean(recording.captured), seen=mean(recording.seen_by_pursuer[alive]),
+                   sees=mean(recording.seen_by_evader[alive]), speed_unseen=mean(speed[moved & ~sees]),
+                   speed_seeing=mean(speed[moved & sees]), distance=mean(np.linalg.norm(evader - pursuer, axis=2)[alive]),
+                   wall=mean(wall[alive]))
 
 
 def policy_seeds(seed: int) -> tuple[int, int]:

@@ -156,7 +156,7 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
 
 # ---------------------------------------------------------------------- Table I
 PAPER_TABLE_I: dict[tuple[str, str], float] = {
-    # (pursuer, evader): capture rate, paper Table I (SPEC section 4)
+    # (pursuer, evader): capture rate, paper Table I (§V-B)
     (pursuer, evader): rate
     for evader, rates in {
         "Random Walk": (0.67, 0.92, 0.98, 0.94, 0.98, 0.98),

@@ -18,3 +18,7 @@ def check_role(role: str) -> Role:
     if role not in ROLES:
         raise ValueError(f"role must be 'pursuer' or 'evader', not {role!r}")
     return role  # type: ignore[return-value]
+
+
+# the scripted opponent a role trains against, is evaluated and checked against when none is named
+DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}

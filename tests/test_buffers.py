@@ -9,7 +9,7 @@ from stable_baselines3.common.buffers import DictReplayBuffer
 
 from pecli.models.buffers import NStepDictReplayBuffer, end_episodes
 from pecli.policies import resolve_policy
-from pecli.rl.durable import Ring, _read_chunks, _write_chunk, replay_arrays
+from pecli.rl.durable import Ring, _read_chunks, replay_arrays, write_chunk
 from pecli.rl.train import TrainJob, make_env, make_model, with_overrides
 from pecli.scenario import Scenario
 
@@ -93,11 +93,11 @@ def test_abandoned_games_end_returns_and_one_step_samples_do_not_change() -> Non
 
 def test_a_row_marked_after_a_save_is_saved_again_with_the_next_rows(tmp_path) -> None:
     buffer = filled(3, rows=4)
-    ring = _write_chunk(tmp_path, "replay", replay_arrays(buffer), Ring(buffer.buffer_size), 4)
+    ring = write_chunk(tmp_path, "replay", replay_arrays(buffer), Ring(buffer.buffer_size), 4)
     end_episodes(buffer)  # row 3, already on disk unmarked
     buffer.add({"obs": np.array([[4.0]], np.float32)}, {"obs": np.array([[4.5]], np.float32)},
                np.zeros((1, 2), np.float32), np.array([5.0]), np.array([False]), [{}])
-    ring = _write_chunk(tmp_path, "replay", replay_arrays(buffer), ring, 5)
+    ring = write_chunk(tmp_path, "replay", replay_arrays(buffer), ring, 5)
     restored = filled(3, rows=0)
     _read_chunks(tmp_path, ring, replay_arrays(restored))
     assert restored.dones[3, 0] == 1 and restored.timeouts[3, 0] == 1 and restored.dones[4, 0] == 0

@@ -308,7 +308,7 @@ def test_runs_start_schedule_by_schedule_with_every_kind_of_a_seed_together() ->
 
 def test_a_setting_added_since_a_run_started_is_a_change_only_where_set_otherwise(paper) -> None:
     """A recorded scenario without a newer training setting ran at that setting's default."""
-    from pecli.experiment.pipeline import changes
+    from pecli.experiment.runs import setting_changes as changes
     from pecli.rl.train import with_overrides
 
     recorded = paper.model_dump(mode="json")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pecli.match import MatchResult, play_match
+from pecli.match import Behaviour, MatchResult, play_match
 from pecli.policies import resolve_policy
 from pecli.policies.heuristics import PurePursuit
 from pecli.policies.windowed import WindowedPolicy
@@ -96,3 +96,36 @@ def test_learned_players_skip_games_that_have_ended(quick: Scenario) -> None:
     assert np.array_equal(first.captured, second.captured) and np.array_equal(first.steps, second.steps)
     assert first.captured.any() and skipping.decided < playing.decided
     assert skipping.decided == sum(-(-int(t) // 2) for t in first.steps)  # one decision per 2 steps of play
+
+
+def test_behaviour_says_how_the_evader_plays(quick: Scenario) -> None:
+    pursuer = resolve_policy("pure-pursuit", "pursuer", quick)
+    seen = {}
+    for name in ("hider", "greedy"):
+        result, recording = play_match(quick, pursuer, resolve_policy(name, "evader", quick), 40, seed=0, record=40)
+        seen[name] = Behaviour.of(recording)
+        assert seen[name].caught == result.capture_rate
+        assert 0 <= seen[name].seen <= 1 and 0 <= seen[name].sees <= 1 and seen[name].distance > 0
+        assert 0 <= seen[name].wall <= min(quick.arena.half)
+        escaped = np.flatnonzero(~recording.captured)
+        picked = recording.games(escaped)
+        assert picked.pursuer.shape[1] == len(escaped) and not picked.captured.any()
+    assert seen["hider"].speed_unseen < seen["hider"].speed_seeing  # it sits still until it sees the pursuer
+    assert seen["greedy"].wall < seen["hider"].wall  # greedy flees straight away from it, into the walls
+
+
+def test_play_behaviour_prints_it_and_joins_the_json() -> None:
+    import json
+
+    from typer.testing import CliRunner
+
+    from pecli.cli import app
+
+    result = CliRunner().invoke(app, ["play", "-p", "pure-pursuit", "-e", "hider", "-c", "quick", "-n", "8",
+                                      "--behaviour", "--json"])
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.stdout)
+    assert record["episodes"] == 8 and set(record["behaviour"]) == {
+        "caught", "seen", "sees", "speed_unseen", "speed_seeing", "distance", "wall"}
+    refused = CliRunner().invoke(app, ["play", "-c", "quick", "-n", "20000", "--behaviour"])
+    assert refused.exit_code == 1 and "at most 10,000" in refused.output

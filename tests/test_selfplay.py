@@ -388,3 +388,17 @@ def test_a_diverging_self_play_stops_without_writing_its_round(tmp_path: Path) -
                     "--steps-per-round", "400", "-q", *[x for k, v in sets.items() for x in ("--set", f"{k}={v}")])
     assert result.exit_code == 1 and "training diverged at step" in result.output, result.output
     assert not list((tmp_path / "nan").rglob("*.zip"))
+
+
+def test_experiment_compare_plays_a_run_against_its_fork(finished: tuple[Path, list[str]], tmp_path: Path) -> None:
+    run, _ = finished
+    fork = CliRunner().invoke(app, ["zoo", "fork", str(run), "--to", str(tmp_path / "arm")])
+    assert fork.exit_code == 0, fork.output
+    result = CliRunner().invoke(app, ["experiment", "compare", "--arms", f"control={run.parent}",
+                                      "--arms", f"forked={tmp_path / 'arm'}", "-n", "4", "--workers", "1",
+                                      "--out", str(tmp_path / "cmp")])
+    assert result.exit_code == 0, result.output
+    rows = [line for line in result.stdout.splitlines() if line.startswith("| control |") or line.startswith("| forked")]
+    assert len(rows) == 2 and all("| sp | 2 |" in row for row in rows)
+    assert rows[0].split("|")[4:8] == rows[1].split("|")[4:8]  # the same weights: one player, the same games
+    assert "- forked" in result.stdout and "a paired test needs 2 runs" in result.stdout

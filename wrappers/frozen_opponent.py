@@ -86,7 +86,7 @@ class FrozenOpponentCore:
         self._opponent_seed = int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
 
     def set_curriculum(self, pursuer_fov: float, evader_speed_scale: float) -> None:
-        """Turn the game's curriculum knobs (SPEC section 1)."""
+        """Turn the game's curriculum knobs (paper §V-A)."""
         self.game.fov["pursuer"] = pursuer_fov
         self.game.speed_scale["evader"] = evader_speed_scale
 

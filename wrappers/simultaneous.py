@@ -77,7 +77,7 @@ class SimultaneousGame:
         self._return = np.zeros(n)
 
     def set_curriculum(self, pursuer_fov: float, evader_speed_scale: float) -> None:
-        """Turn the game's curriculum knobs (SPEC section 1)."""
+        """Turn the game's curriculum knobs (paper §V-A)."""
         self.game.fov["pursuer"] = pursuer_fov
         self.game.speed_scale["evader"] = evader_speed_scale
 

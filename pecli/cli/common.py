@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import functools
 import os
-import signal
-import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -17,6 +14,7 @@ from rich.errors import MarkupError
 from rich.markup import escape
 
 from pecli.errors import PecliError
+from pecli.process import interrupt, one_torch_thread, sigterm_stops  # noqa: F401 (the commands import them here)
 
 if TYPE_CHECKING:
     from pecli.scenario import Scenario
@@ -116,33 +114,6 @@ def user_errors(command: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def one_torch_thread() -> None:
-    """Run torch on one thread if a learned policy loaded it: small batched networks gain nothing from
-    more, and on a shared CPU extra threads make a forward pass 10-100x slower."""
-    torch = sys.modules.get("torch")
-    if torch is not None:
-        torch.set_num_threads(1)
-
-
-def interrupt(signum: int, frame: object) -> NoReturn:
-    """A signal handler that stops the program like Ctrl-C does: by raising :class:`KeyboardInterrupt`."""
-    raise KeyboardInterrupt
-
-
-@contextmanager
-def sigterm_stops() -> Iterator[None]:
-    """Inside the block, SIGTERM (``kill``, a scheduler, a job's time limit) stops like Ctrl-C.
-
-    Long commands catch :class:`KeyboardInterrupt` to save their finished work and say how to resume; this gives
-    ``kill`` the same path. The handler that was there before comes back when the block ends.
-    """
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def require_positive(value: int, name: str) -> int:
     if value < 1:
         raise PecliError(f"{name} must be at least 1, got {value}")
@@ -179,13 +150,3 @@ def scenario_for(players: list[str], config: str | None, folders: bool = False) 
             if runs:
                 return Run(runs[0]).scenario()
     return load_scenario("paper")
-
-
-def resumed_scenario(run_scenario: Scenario, config: str | None, name: str) -> Scenario:
-    """A resumed run's own scenario; :class:`PecliError` if ``--config`` names another game."""
-    from pecli.scenario import load_scenario
-
-    if config is not None and load_scenario(config).fingerprint() != run_scenario.fingerprint():
-        raise PecliError(f"run '{name}' plays scenario '{run_scenario.name}' ({run_scenario.fingerprint()}), another game "
-                         "than --config's; a resumed run keeps its own (drop --config)")
-    return run_scenario

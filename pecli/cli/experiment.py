@@ -1,4 +1,4 @@
-"""``pecli experiment run|show|status|report``: a whole reproduction (train, rank, tournament, report) from one
+"""``pecli experiment run|show|status|report|compare``: a whole reproduction (train, rank, tournament, report) from one
 experiment file, executed on Ray."""
 
 from __future__ import annotations
@@ -13,7 +13,15 @@ import typer
 from rich.live import Live
 from rich.table import Table
 
-from pecli.cli.common import console, err_console, interrupt, sigterm_stops, user_errors
+from pecli.cli.common import (
+    PlayersConfigOption,
+    console,
+    err_console,
+    interrupt,
+    scenario_for,
+    sigterm_stops,
+    user_errors,
+)
 from pecli.locks import locked
 from pecli.scenario import builtin_experiments
 
@@ -227,3 +235,50 @@ def _print_report(out: Path) -> None:
     from pecli.reports import results_table
 
     console.print(results_table(ExperimentReport(out).grouped_results()))
+
+
+@app.command()
+@user_errors
+def compare(
+    arms: Annotated[list[str], typer.Option("--arms", help="LABEL=ZOO for each arm, the control first (repeat, or "
+                                            "one arm for a zoo's strength table).", show_default=False)],
+    config: PlayersConfigOption = None,
+    episodes: Annotated[int, typer.Option("--episodes", "-n", min=1, help="Games per pairing.")] = 500,
+    cpu_hours: Annotated[float | None, typer.Option("--cpu-hours", help="Every run at this CPU budget (default: each "
+                                                    "run's newest round).", show_default=False)] = None,
+    at_round: Annotated[int | None, typer.Option("--round", min=1, help="Every run after this many rounds (equal "
+                                                 "transitions per main learner, not CPU).", show_default=False)] = None,
+    out: Annotated[Path, typer.Option("--out", help="Where the games are cached.")] = Path("runs/compare"),
+    workers: Annotated[int, typer.Option("--workers", min=1, help="Processes that play the pairings.")] = 2,
+) -> None:
+    """An A/B of zoos of the same self-play runs at an equal budget.
+
+    Each arm's pursuers play the scripted evaders and the evaders of every other run of every arm; each arm is
+    pooled against the first (z-test over games) and per run (paired t-test). Runs pair by name (belief kind,
+    schedule, seed), e.g. a control and its copy by `pecli zoo fork` trained on with other settings.
+    """
+    import math
+
+    from pecli.errors import PecliError
+    from pecli.experiment.compare import compare_arms, main_players
+
+    if cpu_hours is not None and at_round is not None:
+        raise PecliError("give --cpu-hours or --round, not both")
+    if cpu_hours is not None and not (math.isfinite(cpu_hours) and cpu_hours > 0):
+        raise PecliError("--cpu-hours must be a number of hours above 0")
+    zoos: dict[str, Path] = {}
+    for entry in arms:
+        label, _, zoo = entry.partition("=")
+        if not label or not zoo or label in zoos:
+            raise PecliError(f"--arms {entry}: give each arm as LABEL=ZOO, with labels of their own")
+        if not Path(zoo).is_dir():
+            raise PecliError(f"--arms {entry}: {zoo} is not a folder")
+        zoos[label] = Path(zoo)
+    picked = {label: main_players(zoo, cpu_hours, at_round, report=lambda line: err_console.print(line, highlight=False))
+              for label, zoo in zoos.items()}
+    scenario = scenario_for([str(players.pursuer) for runs in picked.values() for players in runs.values()], config)
+    result = compare_arms(picked, scenario, out, episodes=episodes, workers=workers)
+    budget = f"{cpu_hours:g} CPU-h" if cpu_hours is not None else f"round {at_round}" if at_round else "the newest round"
+    console.print(f"at {budget}", highlight=False)
+    for line in result.lines():
+        console.print(line, highlight=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Annotated
@@ -22,9 +23,10 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.errors import PecliError
-from pecli.match import play_match
+from pecli.match import Behaviour, play_match
 from pecli.policies import builtin_names, resolve_policy
 
+MAX_BEHAVIOUR = 10_000  # episodes recorded whole for --behaviour
 POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
 
 
@@ -44,6 +46,12 @@ def play(
         Path | None,
         typer.Option("--render", help="Draw episodes: a .png of up to 4 episodes, or a .gif of the first one."),
     ] = None,
+    behaviour: Annotated[
+        bool,
+        typer.Option("--behaviour", help="Also how the evader plays: how often each sees the other, its speed while "
+                     f"it sees the pursuer and while not, its distance to it and to the walls (at most "
+                     f"{MAX_BEHAVIOUR:,} episodes)."),
+    ] = False,
 ) -> None:
     """Play a pursuer against an evader and report the capture rate and time-to-capture.
 
@@ -51,6 +59,8 @@ def play(
     Episode i under one seed always starts from the same state, whoever plays it.
     """
     require_batch(episodes, "play fewer (a tournament plays more over several --seeds)")
+    if behaviour and episodes > MAX_BEHAVIOUR:
+        raise PecliError(f"--behaviour records every episode: play at most {MAX_BEHAVIOUR:,}")
     if render is not None and render.suffix.lower() not in (".png", ".gif"):
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
     if render is not None:
@@ -77,12 +87,13 @@ def play(
             evader_policy,
             episodes=episodes,
             seed=seed,
-            record=record,
+            record=episodes if behaviour else record,
             on_step=lambda step, running: progress.update(task, completed=step, running=running),
         )
 
+    seen = Behaviour.of(recording) if behaviour and recording is not None else None
     if as_json:
-        typer.echo(json.dumps(result.summary()))
+        typer.echo(json.dumps(result.summary() | ({"behaviour": dataclasses.asdict(seen)} if seen else {})))
     else:
         table = Table(title=f"{pursuer} vs {evader} on {scenario.name} (seed {seed})")
         table.add_column("episodes", justify="right")
@@ -94,6 +105,8 @@ def play(
             f"{result.time_to_capture_mean:.3f} ({result.time_to_capture_std:.3f})",
         )
         console.print(table)
+        if seen is not None:
+            _print_behaviour(seen)
 
     if render is not None and recording is not None:
         from pecli.render import animate_episode, draw_episodes
@@ -106,3 +119,14 @@ def play(
             drawn = f"the first {min(record, episodes)} of the {episodes} episodes" if episodes > record else \
                 f"the {episodes} episode{'s' if episodes > 1 else ''}"
         err_console.print(f"wrote {escape(str(render))}: {drawn}", highlight=False)
+
+
+def _print_behaviour(seen: Behaviour) -> None:
+    """The evader's behaviour as a table."""
+    table = Table(title="how the evader plays (means over the steps its games lasted)")
+    for column in ("seen by the pursuer", "sees the pursuer", "speed unseen / seeing (m/step)", "distance",
+                   "to the nearest wall"):
+        table.add_column(column, justify="right")
+    table.add_row(f"{seen.seen:.2f}", f"{seen.sees:.2f}", f"{seen.speed_unseen:.3f} / {seen.speed_seeing:.3f}",
+                  f"{seen.distance:.1f} m", f"{seen.wall:.2f} m")
+    console.print(table)

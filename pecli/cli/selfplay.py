@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import enum
-import math
 from pathlib import Path
 from typing import Annotated
 
@@ -12,13 +11,10 @@ import typer
 from pecli.cli.common import (
     TrainConfigOption,
     err_console,
-    resumed_scenario,
     sigterm_stops,
     user_errors,
 )
 from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
-from pecli.errors import PecliError
-from pecli.rl.budget import MAX_CPU_HOURS
 from pecli.scenario import load_scenario
 
 
@@ -91,19 +87,17 @@ def selfplay(
     """
     from pecli.models.algorithms import torch_device
     from pecli.rl.handover import averaged_from
+    from pecli.rl.resume import check_cpu_hours, resume_selfplay
     from pecli.rl.selfplay import (
         KEEP,
         SelfPlay,
         SelfPlayInterrupted,
         SelfPlayJob,
-        read_state,
     )
     from pecli.rl.train import default_run_name, parse_overrides, with_overrides
-    from pecli.zoo import Run
 
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
-    if cpu_hours is not None and not (math.isfinite(cpu_hours) and 0 < cpu_hours <= MAX_CPU_HOURS):
-        raise PecliError(f"--cpu-hours must be a number of hours above 0 and at most {MAX_CPU_HOURS:,}, not {cpu_hours}")
+    check_cpu_hours(cpu_hours)
     settings = parse_overrides(overrides or [])
     for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
                        ("algo", algo.value if algo else None),
@@ -112,21 +106,7 @@ def selfplay(
         if value is not None:
             settings[key] = value
     if resume:
-        if name is None:
-            raise PecliError("--resume needs the --name of the run to continue")
-        run = Run.open(zoo, name)
-        scenario = resumed_scenario(run.scenario(), config, name)
-        state = read_state(run)
-        if seed is not None and seed != state.seed:
-            raise PecliError(f"run '{name}' plays with --seed {state.seed}; a resumed run keeps it")
-        current = scenario.training.model_dump(mode="json")
-        changed = sorted(key for key, value in settings.items() if key != "selfplay.rounds" and _get(current, key) != value)
-        if changed:
-            raise PecliError(f"only --rounds can change when resuming (not {', '.join(changed)})")
-        played = max((t.round for t in state.turns), default=0)
-        if rounds is not None and rounds < played:
-            raise PecliError(f"run '{name}' has played {played} rounds already: --rounds must be at least that")
-        seed = state.seed
+        scenario, seed = resume_selfplay(zoo, name, config, seed, settings)
     else:
         scenario = load_scenario(config or "paper")
         seed = 0 if seed is None else seed
@@ -170,12 +150,4 @@ def selfplay(
         what = "its last round" if rounds == 1 else f"the mean of its last {rounds} rounds"
         average = f"; to hand over: {averages[role]} ({what})" if rounds else ""
         err_console.print(f"[green]done[/]: {role} {path}{average}", highlight=False, soft_wrap=True)
-
-
-def _get(data: dict, dotted: str) -> object:
-    for part in dotted.split("."):
-        if not isinstance(data, dict) or part not in data:
-            return None
-        data = data[part]
-    return data
 

@@ -13,11 +13,9 @@ from pecli.belief import BELIEF_KINDS
 from pecli.cli.common import (
     TrainConfigOption,
     err_console,
-    resumed_scenario,
     sigterm_stops,
     user_errors,
 )
-from pecli.errors import PecliError
 from pecli.scenario import ALGOS, load_scenario
 
 
@@ -69,9 +67,8 @@ def train(
     TensorBoard logs are in zoo/<run>/tb.
     """
     from pecli.models.algorithms import torch_device
-    from pecli.policies.registry import recorded_policy
+    from pecli.rl.resume import resume_train
     from pecli.rl.train import (
-        DEFAULT_OPPONENT,
         TrainingInterrupted,
         TrainJob,
         default_run_name,
@@ -79,7 +76,8 @@ def train(
         with_overrides,
     )
     from pecli.rl.train import train as run_training
-    from pecli.zoo import JOB_FILE, Run
+    from pecli.roles import DEFAULT_OPPONENT
+    from pecli.zoo import Run
 
     role_name = role.value
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
@@ -92,29 +90,8 @@ def train(
         settings["belief"] = belief.value
     curriculum_steps = None
     if resume:
-        if name is None:
-            raise PecliError("--resume needs the --name of the run to continue")
-        run = Run.open(zoo, name)
-        scenario = resumed_scenario(run.scenario(), config, name)
-        kept = run.job()
-        if kept is None or kept.get("command") != "train":
-            what = "an older pecli's run (no run.json)" if kept is None else f"a {kept.get('command')} run"
-            raise PecliError(f"run '{name}' is {what}: `pecli train --resume` cannot continue it")
-        if any(kept.get(key) is None for key in ("role", "opponent", "seed")):
-            raise PecliError(f"{run.path / JOB_FILE}: damaged (a train run records its role, opponent and seed)")
-        if kept["role"] != role_name:
-            raise PecliError(f"run '{name}' trains the {kept['role']}, not the {role_name}")
-        for option, given, value in (("--opponent", opponent, kept["opponent"]), ("--seed", seed, kept["seed"])):
-            if given is not None and given != value:
-                raise PecliError(f"run '{name}' trains with {option} {value}; a resumed run keeps it")
-        t = scenario.training
-        unchanged = {key for key, value in (("algo", t.algo), ("belief", t.belief)) if settings.get(key) == value}
-        changed = sorted(set(settings) - {"steps"} - unchanged)
-        if changed:
-            raise PecliError(f"only --steps can change when resuming (not {', '.join(changed)})")
-        if opponent is None:  # the record's, checked: a run folder from elsewhere names no code or path to follow
-            opponent = recorded_policy(kept["opponent"], zoo, f"{run.path / JOB_FILE}")
-        seed, curriculum_steps = kept["seed"], t.steps
+        kept = resume_train(zoo, name, role_name, config, opponent, seed, settings)
+        scenario, opponent, seed, curriculum_steps = kept.scenario, kept.opponent, kept.seed, kept.curriculum_steps
     else:
         scenario = load_scenario(config or "paper")
     if settings:

@@ -43,7 +43,6 @@ StorageOption = Annotated[str | None, typer.Option("--storage", help="Any Optuna
 def _tune(what: str, **options: Any) -> None:
     from pecli.models.algorithms import torch_device
     from pecli.rl.search_space import load_space
-    from pecli.rl.train import DEFAULT_OPPONENT
     from pecli.rl.tune import (
         TuneSettings,
         Worker,
@@ -54,6 +53,7 @@ def _tune(what: str, **options: Any) -> None:
         stored_settings,
     )
     from pecli.rl.tune_report import write_report
+    from pecli.roles import DEFAULT_OPPONENT
     from pecli.scenario import load_scenario
 
     o = options

@@ -41,11 +41,11 @@ from pecli.experiment.folder import (
     read_state,
     read_task_marker,
 )
-from pecli.experiment.runs import averages_behind, run_progress
+from pecli.experiment.runs import averages_behind, run_progress, setting_changes
 from pecli.experiment.spec import LoadedExperiment, RunSpec
 from pecli.io import atomic_write_json, atomic_write_text
 from pecli.roles import ROLES
-from pecli.scenario import Training, dotted, read_yaml
+from pecli.scenario import read_yaml
 
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster
@@ -111,7 +111,7 @@ class ExperimentRunner:
         scenario = self.experiment.scenario.model_dump(mode="json", exclude={"name", "description"})
         recorded = self.out / SCENARIO_FILE
         if state and recorded.is_file():
-            changed = changes(read_yaml(recorded), scenario)
+            changed = setting_changes(read_yaml(recorded), scenario)
             if changed:
                 more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
                 raise PecliError(f"the scenario '{spec.scenario}' has changed since {self.out} started "
@@ -331,19 +331,6 @@ class ExperimentRunner:
         paths = write_report(self.out)
         self.stages["report"] = "done"
         return paths[0]
-
-
-def changes(old: Any, new: dict[str, Any]) -> list[str]:
-    """The settings of the recorded scenario dump ``old`` that differ in ``new``, as ``key: old -> new``
-    (dotted keys). A training setting ``old`` lacks (one added to pecli since) ran at its default: it is a
-    change only where ``new`` sets it otherwise."""
-    before, after = dotted(old), dotted(new)
-    defaults = dotted(Training().model_dump(mode="json"), "training.")
-    added = {key: defaults[key] for key in after.keys() & (defaults.keys() - before.keys())}  # ran at their defaults
-    recorded = {**added, **before}
-    shown = {key: f"{value} (its default)" for key, value in added.items()}
-    return [f"{key}: {shown.get(key, recorded[key])} -> {after.get(key, '(no such setting)')}"
-            for key in sorted(recorded) if recorded[key] != after.get(key, object())]
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

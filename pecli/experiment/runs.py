@@ -17,12 +17,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from pecli.errors import PecliError
+from pecli.errors import ConfigError, PecliError
 from pecli.experiment.spec import RunSpec
 from pecli.io import read_json
 from pecli.rl.budget import budget_reached, whole_rounds
 from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE
 from pecli.rl.handover import stale_averages
+from pecli.scenario import Training, dotted, read_yaml
 from pecli.zoo import FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
@@ -117,7 +118,8 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False,
     import torch
 
     from pecli.rl.selfplay import SelfPlay, SelfPlayJob, read_state, write_averages
-    from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, train
+    from pecli.rl.train import TrainJob, train
+    from pecli.roles import DEFAULT_OPPONENT
 
     torch.set_num_threads(run.scenario.training.torch_threads)
     cpu = time.process_time()
@@ -145,3 +147,27 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False,
                        seed=run.seed, resume=resume, progress=progress))
     return {"did": "resumed" if resume else "started", "cpu_seconds": round(time.process_time() - cpu, 2),
             "progress": run_progress(run, zoo).to_dict()}
+
+
+def setting_changes(old: Any, new: dict[str, Any]) -> list[str]:
+    """The settings of the recorded scenario dump ``old`` that differ in ``new``, as ``key: old -> new``
+    (dotted keys). A training setting ``old`` lacks (one added to pecli since) ran at its default: it is a
+    change only where ``new`` sets it otherwise."""
+    before, after = dotted(old), dotted(new)
+    defaults = dotted(Training().model_dump(mode="json"), "training.")
+    added = {key: defaults[key] for key in after.keys() & (defaults.keys() - before.keys())}  # ran at their defaults
+    recorded = {**added, **before}
+    shown = {key: f"{value} (its default)" for key, value in added.items()}
+    return [f"{key}: {shown.get(key, recorded[key])} -> {after.get(key, '(no such setting)')}"
+            for key in sorted(recorded) if recorded[key] != after.get(key, object())]
+
+
+def check_unchanged(run: RunSpec, zoo: Path) -> None:
+    """:class:`ConfigError` if ``run`` was started in ``zoo`` with other settings: a resumed run keeps its own."""
+    recorded = zoo / run.name / "config.yaml"
+    if not recorded.is_file():
+        return
+    changed = setting_changes(read_yaml(recorded), run.scenario.model_dump(mode="json"))
+    if changed:
+        raise ConfigError(f"{run.name} was started with other settings ({changed[0]}): give them again, "
+                          "or another zoo")

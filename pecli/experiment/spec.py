@@ -42,6 +42,7 @@ from pecli.scenario import (
     Scenario,
     builtin_experiment_dir,
     builtin_experiments,
+    dotted,
     load_scenario,
     read_yaml,
     validation_message,
@@ -170,17 +171,6 @@ class RunSpec(BaseModel):
         return ("pursuer", "evader") if self.selfplay else (self.schedule,)  # type: ignore[return-value]
 
 
-def _flatten(data: dict, prefix: str = "") -> dict[str, object]:
-    """``{"selfplay": {"rounds": 2}}`` -> ``{"selfplay.rounds": 2}`` (dotted keys stay as they are)."""
-    flat: dict[str, object] = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
-
-
 class LoadedExperiment:
     """An :class:`Experiment` with its base scenario and its runs resolved."""
 
@@ -247,7 +237,8 @@ def experiment_from_dict(data: object, source: str, base: Path | None = None) ->
         raise ConfigError(f"{source}: scenario: {exc}") from None
     if scenario_path.is_file():  # a scenario file: recorded by its absolute path, read from wherever --out is
         spec = spec.model_copy(update={"scenario": str(scenario_path.resolve())})
-    scenario = with_overrides(scenario, _flatten(dict(spec.training)), source=source)
+    flat = {key: value for key, value in dotted(dict(spec.training)).items() if value != {}}  # an empty section: nothing
+    scenario = with_overrides(scenario, flat, source=source)
     _check_players(spec, scenario, source)
     return LoadedExperiment(spec, scenario, source)
 

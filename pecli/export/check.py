@@ -17,11 +17,10 @@ from pecli.match import policy_seeds
 from pecli.policies.base import Policy
 from pecli.policies.exported import ExportedPolicy
 from pecli.policies.registry import resolve_policy
-from pecli.roles import ROLES, opponent_of
+from pecli.roles import DEFAULT_OPPONENT, ROLES, opponent_of
 from pecli.scenario import Scenario
 
-TOLERANCE = 1e-5  # the largest action difference an export may show (issue 7)
-OPPONENT = {"pursuer": "greedy", "evader": "pure-pursuit"}  # a player of each role is recorded against this
+TOLERANCE = 1e-5  # the largest action difference an export may show
 
 
 @dataclass(frozen=True)
@@ -84,9 +83,9 @@ def check_parity(
     seed: int = 0,
     opponent: str | None = None,
 ) -> ParityReport:
-    """Record ``checkpoint``'s games against ``opponent`` (a policy string; default :data:`OPPONENT`)
+    """Record ``checkpoint``'s games against ``opponent`` (a policy string; default :data:`~pecli.roles.DEFAULT_OPPONENT`)
     and replay them through ``exported``."""
-    opponent = opponent or OPPONENT[checkpoint.role]
+    opponent = opponent or DEFAULT_OPPONENT[checkpoint.role]
     other = resolve_policy(opponent, opponent_of(checkpoint.role), scenario)
     observations, actions = record_games(scenario, checkpoint, other, episodes, seed)
     exported.reset(episodes, seed=dict(zip(ROLES, policy_seeds(seed)))[exported.role])

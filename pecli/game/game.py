@@ -68,7 +68,7 @@ class Game:
         self.codecs = {role: ObservationCodec(scenario, role) for role in ROLES}
         self.obs_dim: dict[Role, int] = {role: self.codecs[role].dim for role in ROLES}
         self.state_dim = sum(d.state_dim for d in self.dynamics.values())
-        # knobs a curriculum may turn while training (SPEC section 1)
+        # knobs a curriculum may turn while training (paper §V-A)
         self.fov: dict[Role, float] = {role: scenario.agent(role).sensor.fov for role in ROLES}
         self.speed_scale: dict[Role, float] = {role: 1.0 for role in ROLES}
         self._half = scenario.arena.half

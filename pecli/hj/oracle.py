@@ -1,4 +1,4 @@
-"""The closed-form value of the 4D relative game with equal acceleration bounds (SPEC §6): a free test oracle.
+"""The closed-form value of the 4D relative game with equal acceleration bounds : a free test oracle.
 
 With equal bounds the pursuer can copy the evader's acceleration, and the evader can copy the
 pursuer's, so under optimal play the relative velocity ``w`` stays constant and the value is the

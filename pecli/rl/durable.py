@@ -138,7 +138,7 @@ def replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
     return arrays
 
 
-def _write_chunk(directory: Path, prefix: str, arrays: dict[str, np.ndarray], ring: Ring, added: int) -> Ring:
+def write_chunk(directory: Path, prefix: str, arrays: dict[str, np.ndarray], ring: Ring, added: int) -> Ring:
     """``ring`` after writing the rows ``[ring.added - 1, added)`` (at most the last ``capacity``) to a new file.
 
     The previous file's last row is written again: a learner that abandons its games marks it as an
@@ -268,11 +268,11 @@ class DurableState:
         if buffer is not None:
             ring = previous.replay if previous and previous.replay else Ring(buffer.buffer_size)
             added = _replay_added(buffer, ring, previous.steps if previous else 0, steps)
-            record.replay = _write_chunk(self.directory, "replay", replay_arrays(buffer), ring, added)
+            record.replay = write_chunk(self.directory, "replay", replay_arrays(buffer), ring, added)
         if fit is not None:
             pairs = fit.buffer
             ring = previous.belief if previous and previous.belief else Ring(pairs.capacity)
-            record.belief = _write_chunk(self.directory, "belief", pairs.arrays(), ring, pairs.added)
+            record.belief = write_chunk(self.directory, "belief", pairs.arrays(), ring, pairs.added)
             record.belief_rng = pairs.rng.bit_generator.state
             record.belief_optimizer = f"belief-optimizer-{steps:09d}.pt"
             with atomic_path(self.directory / record.belief_optimizer) as tmp:

@@ -45,12 +45,10 @@ from pecli.rl.callbacks import (
     every_episodes,
 )
 from pecli.rl.durable import DurableState
-from pecli.roles import Role, opponent_of
+from pecli.roles import DEFAULT_OPPONENT, Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
-
-DEFAULT_OPPONENT: dict[Role, str] = {"pursuer": "greedy", "evader": "pure-pursuit"}
 
 
 def with_overrides(scenario: Scenario, overrides: dict[str, Any], source: str = "--set") -> Scenario:

@@ -1,0 +1,114 @@
+"""The records kept beside a run, typed: ``run.json`` (the command that made the run) and ``selfplay.json`` (a
+self-play run's turns, opponent pools and meta-game games).
+
+A zoo may come from elsewhere, so every field is bounded and checked before pecli acts on it (a record that is
+not one ends in one line naming the field). Torch-free: reading a record loads no network.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from pecli.errors import PecliError
+from pecli.roles import Role
+
+MAX_ROUNDS = 1_000_000
+MAX_COUNT = 10**13  # transitions or games a record may count
+MAX_CPU_SECONDS = 3.6e7  # 10 000 CPU-hours
+MAX_ENTRIES = 100_000  # opponents in one pool, turns in one run
+MAX_TEXT = 4096  # a name, a policy string, a run-relative path
+
+Learner = Literal["main", "exploiter"]
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="ignore", strict=True, allow_inf_nan=False)
+
+
+class JobRecord(_Record):
+    """What ``run.json`` must hold to be read: the command, and for ``pecli train`` the role, opponent and seed."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+
+    command: str = Field(max_length=100)
+    role: Role | None = None
+    opponent: str | None = Field(default=None, max_length=MAX_TEXT)
+    seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+
+
+class Turn(_Record):
+    """One side's training in one round of self-play."""
+
+    model_config = ConfigDict(extra="ignore", strict=True, allow_inf_nan=False, validate_assignment=True)
+
+    round: int = Field(ge=1, le=MAX_ROUNDS)
+    role: Role
+    steps: int = Field(ge=0, le=MAX_COUNT)  # the learner's total transitions at the end of the turn
+    episodes: int = Field(ge=0, le=MAX_COUNT)
+    captures: int = Field(ge=0, le=MAX_COUNT)
+    cpu_seconds: float = Field(ge=0.0, le=MAX_CPU_SECONDS)
+    checkpoint: str = Field(max_length=MAX_TEXT)  # run-relative
+    opponents: int = Field(ge=0, le=MAX_ENTRIES)  # entries in the opponents' pool during the turn
+    learner: Learner = "main"  # main, or exploiter (league)
+    joined: bool = False  # an exploiter's checkpoint joined its side's pool
+    joined_by: Literal["", "win", "timeout"] = ""  # why it joined ("" if it did not, or in an older record)
+    join_rate: float | None = Field(default=None, ge=0.0, le=1.0)  # an exploiter's win rate in its join games
+
+    @model_validator(mode="after")
+    def _captures_within_episodes(self) -> Turn:
+        if self.captures > self.episodes:
+            raise ValueError(f"{self.captures} captures in {self.episodes} episodes")
+        return self
+
+    @property
+    def capture_rate(self) -> float:
+        return self.captures / self.episodes if self.episodes else float("nan")
+
+
+class PoolEntryRecord(_Record):
+    """One opponent of a pool as ``selfplay.json`` stores it."""
+
+    name: str = Field(max_length=MAX_TEXT)
+    spec: str = Field(min_length=1, max_length=MAX_TEXT)
+    generation: int = Field(ge=0, le=MAX_ROUNDS)
+    episodes: float = Field(default=0.0, ge=0.0, le=MAX_COUNT)
+    wins: float = Field(default=0.0, ge=0.0, le=MAX_COUNT)
+
+
+class PoolRecord(_Record):
+    role: Role
+    entries: list[PoolEntryRecord] = Field(max_length=MAX_ENTRIES)
+
+
+class SelfPlayRecord(_Record):
+    """What ``selfplay.json`` holds."""
+
+    seed: int = Field(ge=0, le=2**32 - 1)
+    curriculum_steps: int = Field(ge=0, le=MAX_COUNT)  # the span the curriculum is scheduled over
+    pools: dict[Role, PoolRecord]
+    turns: list[Turn] = Field(default_factory=list, max_length=MAX_ENTRIES)
+    cpu_hours: float | None = Field(default=None, gt=0.0, le=10_000.0)  # absent in older records
+    payoffs: dict[str, list[int]] = Field(default_factory=dict, max_length=MAX_ENTRIES)  # "pursuer|evader": games
+
+    @model_validator(mode="after")
+    def _payoffs_are_games(self) -> SelfPlayRecord:
+        for key, value in self.payoffs.items():
+            captures, games = (value + [-1, -1])[:2] if len(value) == 2 else (-1, -1)
+            if not 0 <= captures <= games or not 1 <= games <= MAX_COUNT or len(key) > 2 * MAX_TEXT + 1:
+                raise ValueError(f"payoffs: {captures} captures in {games} games ({key[:40]})")
+        for role, pool in self.pools.items():
+            if pool.role != role:
+                raise ValueError(f"pools: the {role} pool says it is the {pool.role}'s")
+        return self
+
+
+def validated(model: type[_Record], data: object, path: object, what: str) -> _Record:
+    """``data`` as ``model``, or :class:`PecliError` in one line naming the first field that is wrong."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"]) or "the record"
+        raise PecliError(f"{path}: damaged {what} ({where}: {first['msg']})") from None

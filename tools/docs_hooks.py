@@ -14,7 +14,6 @@ An unknown marker fails the build. :func:`on_page_content` turns the Sphinx role
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 import types

@@ -1,11 +1,13 @@
 # Two commands do all the set-up: `make demo` and `make test`.
 # Each creates .venv when it is missing, installs torch (CPU wheel) first, then pecli with its dev extra.
+# `make docs` adds the docs extra and builds the documentation site into site/ (a broken link fails it).
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pecli-installed
+DOCS_STAMP := $(VENV)/.pecli-docs-installed
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test docs bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -32,8 +34,17 @@ demo: install
 test: install
 	$(PY) -m pytest -q
 
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e ".[dev,docs]"
+	@touch $(DOCS_STAMP)
+
+# The site: every page in docs/, the CLI and config reference generated from the code (tools/docs_hooks.py),
+# the Python API from the docstrings. --strict turns any warning (a broken link or anchor) into a failure.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
+
 bench: install
 	$(PY) benchmarks/bench_sim.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) build site *.egg-info .pytest_cache

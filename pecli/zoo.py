@@ -34,15 +34,16 @@ import weakref
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ValidationError
 
 from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text, read_json
 from pecli.locks import acquire, release
+from pecli.records import JobRecord
 from pecli.roles import Role
 from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
 
@@ -337,17 +338,6 @@ class Run:
             first = exc.errors()[0]
             raise ZooError(f"{path}: damaged ({'.'.join(map(str, first['loc'])) or 'record'}: {first['msg']})") from None
         return data
-
-
-class JobRecord(BaseModel):
-    """What ``run.json`` must hold to be read: the command, and for ``pecli train`` the role, opponent and seed."""
-
-    model_config = ConfigDict(extra="allow", strict=True)
-
-    command: str = Field(max_length=100)
-    role: Literal["pursuer", "evader"] | None = None
-    opponent: str | None = Field(default=None, max_length=4096)
-    seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
 
 
 @dataclass

@@ -17,6 +17,11 @@ from pecli.experiment.compare import contrast, main_players, over_every_evader, 
 RUNS = ["none-league-s0", "none-league-s1", "none-alternating-s0", "none-alternating-s1", "none-simultaneous-s0"]
 
 
+def turn(r: int, role: str, checkpoint: str, cpu_seconds: float, **more: object) -> dict:
+    return {"round": r, "role": role, "steps": 100 * r, "episodes": 10, "captures": 5, "cpu_seconds": cpu_seconds,
+            "checkpoint": checkpoint, "opponents": 3, **more}
+
+
 def fake_run(zoo: Path, name: str, cpu_per_round: float, rounds: int) -> Path:
     """A self-play run's record and checkpoint files as far as picking players reads them."""
     run = zoo / name
@@ -25,11 +30,10 @@ def fake_run(zoo: Path, name: str, cpu_per_round: float, rounds: int) -> Path:
         for role in ("pursuer", "evader"):
             (run / role).mkdir(parents=True, exist_ok=True)
             (run / role / f"round-{r:03d}.zip").write_bytes(b"w")
-            turns.append({"round": r, "role": role, "checkpoint": f"{role}/round-{r:03d}.zip",
-                          "cpu_seconds": cpu_per_round / 2})
-    turns.append({"round": 1, "role": "evader", "learner": "exploiter", "checkpoint": "exploiters/x.zip",
-                  "cpu_seconds": 0.0})
-    (run / "selfplay.json").write_text(json.dumps({"turns": turns}))
+            turns.append(turn(r, role, f"{role}/round-{r:03d}.zip", cpu_per_round / 2))
+    turns.append(turn(1, "evader", "exploiters/x.zip", 0.0, learner="exploiter"))
+    pools = {role: {"role": role, "entries": []} for role in ("pursuer", "evader")}
+    (run / "selfplay.json").write_text(json.dumps({"seed": 0, "curriculum_steps": 0, "pools": pools, "turns": turns}))
     return run
 
 
@@ -48,6 +52,11 @@ def test_each_run_is_taken_at_an_equal_budget(tmp_path: Path) -> None:
     assert list(main_players(tmp_path, pattern=re.compile("s.*"))) == ["slow"]
     with pytest.raises(PecliError, match="has the rounds asked for"):
         main_players(tmp_path, cpu_hours=100.0)
+    record = json.loads((tmp_path / "slow" / "selfplay.json").read_text())
+    record["turns"][0]["captures"] = 11  # more captures than games: a damaged record, refused in one line
+    (tmp_path / "slow" / "selfplay.json").write_text(json.dumps(record))
+    with pytest.raises(PecliError, match=r"slow/selfplay.json: damaged self-play record \(turns.0: Value error"):
+        main_players(tmp_path)
 
 
 def test_groups_are_compared_over_the_evaders_all_their_pursuers_met() -> None:

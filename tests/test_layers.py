@@ -101,3 +101,13 @@ def test_the_lower_layers_import_nothing_above_them():
     graph = _graph(lambda name: ".".join(name.split(".")[:2]))
     assert not graph["pecli.game"] & {"pecli.policies", "pecli.models", "pecli.rl", "pecli.match"}
     assert "pecli.rl" not in graph["pecli.policies"] and "pecli.rl" not in graph["pecli.models"]
+
+
+def test_records_load_no_network() -> None:
+    """A run's records are read (and refused) without loading torch or Stable-Baselines3."""
+    import subprocess
+    import sys
+
+    code = ("import sys, pecli.records, pecli.rl.state, pecli.experiment.compare; "
+            "assert not {'torch', 'stable_baselines3'} & set(sys.modules), sorted(sys.modules)")
+    subprocess.run([sys.executable, "-c", code], check=True)

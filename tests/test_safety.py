@@ -267,10 +267,10 @@ def test_a_selfplay_pool_entry_that_names_code_imports_nothing(quick: Scenario, 
     state_path.write_text(json.dumps(state))
     play = SelfPlay(SelfPlayJob(scenario, tmp_path, "sp", resume=True, progress=False))
     with pytest.raises(PolicyError, match="imports no code"):
-        play._policy("evader", "os:system")
+        play.players.player("evader", "os:system")
     (tmp_path.parent / f"{tmp_path.name}-elsewhere.zip").write_bytes(b"PK")
     with pytest.raises(PolicyError, match="outside"):
-        play._policy("evader", f"../../{tmp_path.name}-elsewhere.zip")
+        play.players.player("evader", f"../../{tmp_path.name}-elsewhere.zip")
 
 
 DEEP = "[" * 100_000 + "]" * 100_000

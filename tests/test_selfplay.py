@@ -301,10 +301,10 @@ def test_pfsp_priors_come_from_the_zoos_tournament_by_role(finished: tuple[Path,
     ]
     (run.parent / "tournament").mkdir(exist_ok=True)
     (run.parent / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
-    priors = loop._priors("pursuer")
+    priors = loop.opponents.priors("pursuer", loop.state)
     assert priors["greedy"] == pytest.approx(predicted_win_rate(1800, 1600)) and priors["greedy"] > 0.5
     assert priors["random-walk"] == pytest.approx(predicted_win_rate(1200, 1600))
-    assert "random-walk" not in loop._priors("evader")  # a pursuer random-walk was never rated
+    assert "random-walk" not in loop.opponents.priors("evader", loop.state)  # a pursuer random-walk was never rated
     (run.parent / "tournament" / "results.json").unlink()
 
 

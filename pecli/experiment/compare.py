@@ -23,6 +23,7 @@ from scipy.stats import ttest_ind, ttest_rel
 
 from pecli.errors import PecliError
 from pecli.io import file_digest, read_json
+from pecli.records import SelfPlayRecord, validated
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import mantel_haenszel_test, two_proportion_z_test
@@ -49,12 +50,10 @@ class RunPlayers:
 
 
 def _main_turns(state: Path) -> tuple[dict[tuple[int, str], Path], list[dict]]:
-    turns = read_json(state, "self-play record").get("turns", [])
-    if not isinstance(turns, list):
-        raise PecliError(f"{state}: damaged self-play record (turns)")
-    main = {(t["round"], t["role"]): state.parent / t["checkpoint"] for t in turns
-            if isinstance(t, dict) and t.get("learner", "main") == "main" and "checkpoint" in t}
-    return main, turns
+    """Each main turn's checkpoint by (round, role), and every turn as recorded; :class:`PecliError` if damaged."""
+    record = validated(SelfPlayRecord, read_json(state, "self-play record"), state, "self-play record")
+    main = {(t.round, t.role): state.parent / t.checkpoint for t in record.turns if t.learner == "main"}
+    return main, [t.model_dump() for t in record.turns]
 
 
 def main_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None, average: int = 1,

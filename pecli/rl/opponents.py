@@ -25,9 +25,9 @@ from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
 from pecli.policies.registry import recorded_policy
-from pecli.records import SelfPlayRecord
 from pecli.rl.handover import STATE_FILE
 from pecli.rl.pool import OpponentPool, predicted_win_rate
+from pecli.rl.state import SelfPlayState
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, SelfPlay
 from pecli.zoo import tournament_ratings
@@ -70,15 +70,15 @@ class OpponentRule:
     def __init__(self, settings: SelfPlay) -> None:
         self.settings = settings
 
-    def priors(self, learner: Role, state: SelfPlayRecord) -> dict[str, float]:
+    def priors(self, learner: Role, state: SelfPlayState) -> dict[str, float]:
         """Each opponent's prior win rate against ``learner``'s latest checkpoint, by name (none known: {})."""
         return {}
 
-    def mixture(self, side: Role, state: SelfPlayRecord) -> dict[str, float] | None:
+    def mixture(self, side: Role, state: SelfPlayState) -> dict[str, float] | None:
         """A mixture over ``side``'s pool that replaces the records' weights (None: the records decide)."""
         return None
 
-    def weigher(self, learner: Role, state: SelfPlayRecord) -> Callable[[OpponentPool], np.ndarray]:
+    def weigher(self, learner: Role, state: SelfPlayState) -> Callable[[OpponentPool], np.ndarray]:
         """The weights of the opponents' pool for ``learner``'s turn."""
         sp, priors, mixture = self.settings, self.priors(learner, state), self.mixture(opponent_of(learner), state)
         return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
@@ -93,7 +93,7 @@ class Prioritised(OpponentRule):
         super().__init__(settings)
         self.run, self.zoo = run, zoo
 
-    def priors(self, learner: Role, state: SelfPlayRecord) -> dict[str, float]:
+    def priors(self, learner: Role, state: SelfPlayState) -> dict[str, float]:
         mine = [t for t in state.turns if t.role == learner and t.learner == "main"]
         if not mine:
             return {}
@@ -119,7 +119,7 @@ class NashMixture(OpponentRule):
         super().__init__(settings)
         self.players = players
 
-    def mixture(self, side: Role, state: SelfPlayRecord) -> dict[str, float]:
+    def mixture(self, side: Role, state: SelfPlayState) -> dict[str, float]:
         pursuers, evaders = state.pools["pursuer"].entries, state.pools["evader"].entries
         missing = [(p, e) for p in pursuers for e in evaders if f"{p.name}|{e.name}" not in state.payoffs]
         loaded: dict[tuple[Role, str], Policy] = {}  # fresh players: the pools' own are sized for the learner's games

@@ -27,10 +27,9 @@ learner's newest commit: at most one checkpoint interval is lost.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -39,14 +38,10 @@ import torch as th
 from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json, read_json
-from pecli.match import play_match
-from pecli.metagame import solve
+from pecli.io import atomic_write_json
 from pecli.models.buffers import end_episodes
-from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
-from pecli.policies.registry import builtin_names, recorded_policy
 from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints
 from pecli.rl.callbacks import (
@@ -60,8 +55,10 @@ from pecli.rl.callbacks import (
 )
 from pecli.rl.durable import DurableState
 from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
-from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN, OpponentPool, predicted_win_rate
+from pecli.rl.opponents import PoolPlayers, opponent_rule
+from pecli.rl.pool import EXPLOITER, MAIN, OpponentPool
 from pecli.rl.simultaneous import learn_simultaneously
+from pecli.rl.state import SelfPlayState, Turn, checkpoint_name, initial_state, read_state, round_of  # noqa: F401
 from pecli.rl.train import (
     TrainJob,
     checkpoint_meta,
@@ -71,7 +68,7 @@ from pecli.rl.train import (
 )
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.zoo import RESUME_DIR, Run, tournament_ratings
+from pecli.zoo import RESUME_DIR, Run
 from wrappers.simultaneous import SimultaneousGame
 
 KEEP = "keep"  # SelfPlayJob.cpu_hours: a resumed run keeps its own budget
@@ -99,97 +96,6 @@ class SelfPlayJob:
     device: str = "cpu"  # where the networks train: cpu, cuda or auto
     cpu_hours: float | None | Literal["keep"] = KEEP  # the run's CPU budget (pecli.rl.budget), None for none, or
     # KEEP: a resumed run's own (none for a new run)
-
-
-@dataclass
-class Turn:
-    """One side's training in one round."""
-
-    round: int
-    role: Role
-    steps: int  # the learner's total transitions at the end of the turn
-    episodes: int
-    captures: int
-    cpu_seconds: float
-    checkpoint: str  # run-relative
-    opponents: int  # entries in the opponents' pool during the turn
-    learner: str = MAIN  # main, or exploiter (league)
-    joined: bool = False  # an exploiter's checkpoint joined its side's pool
-    joined_by: str = ""  # why it joined: "win" or "timeout" ("" if it did not, or in a record older than the field)
-    join_rate: float | None = None  # an exploiter's win rate in its join games (exploiter_join_games), if any
-
-    @property
-    def capture_rate(self) -> float:
-        return self.captures / self.episodes if self.episodes else float("nan")
-
-
-@dataclass
-class SelfPlayState:
-    """What ``selfplay.json`` holds."""
-
-    seed: int
-    curriculum_steps: int  # the span the curriculum is scheduled over (fixed when the run starts)
-    pools: dict[str, OpponentPool]
-    turns: list[Turn] = field(default_factory=list)
-    cpu_hours: float | None = None  # the CPU budget: the run stops after the first round that reaches it
-    payoffs: dict[str, list[int]] = field(default_factory=dict)  # opponents nash: "pursuer|evader" -> [captures, games]
-
-    def done(self, round: int, role: Role, learner: str = MAIN) -> bool:
-        return any(t.round == round and t.role == role and t.learner == learner for t in self.turns)
-
-    def latest(self, role: Role, learner: str = MAIN) -> Turn | None:
-        mine = [t for t in self.turns if t.role == role and t.learner == learner]
-        return mine[-1] if mine else None
-
-    def cpu_seconds(self, through: int | None = None) -> float:
-        """CPU seconds of the finished turns (exploiters' included), of rounds 1 to ``through`` if given."""
-        return budget.cpu_through(self.records(), math.inf if through is None else through)
-
-    def records(self) -> list[dict[str, Any]]:
-        """The turns as ``selfplay.json`` stores them (what :mod:`pecli.rl.budget` reads)."""
-        return [asdict(t) for t in self.turns]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "seed": self.seed,
-            "curriculum_steps": self.curriculum_steps,
-            "pools": {role: pool.to_dict() for role, pool in self.pools.items()},
-            "turns": self.records(),
-            "cpu_hours": self.cpu_hours,
-            "payoffs": self.payoffs,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SelfPlayState:
-        return cls(
-            seed=int(data["seed"]),
-            curriculum_steps=int(data["curriculum_steps"]),
-            pools={role: OpponentPool.from_dict(pool) for role, pool in data["pools"].items()},
-            turns=[Turn(**{key: value for key, value in t.items() if key in Turn.__dataclass_fields__}) for t in data["turns"]],
-            cpu_hours=None if data.get("cpu_hours") is None else float(data["cpu_hours"]),  # absent in older records
-            payoffs={str(key): _payoff(value) for key, value in data.get("payoffs", {}).items()},
-        )
-
-
-def _payoff(value: Any) -> list[int]:
-    """A meta-game record ``[captures, games]``; ``ValueError`` for counts no pairing gives."""
-    captures, games = value
-    if not all(isinstance(x, int) and not isinstance(x, bool) for x in (captures, games)) or not 0 <= captures <= games \
-            or games < 1:
-        raise ValueError(f"a payoff of {captures!r} captures in {games!r} games")
-    return [captures, games]
-
-
-def read_state(run: Run) -> SelfPlayState:
-    """The state of a self-play run; :class:`PecliError` if it has none or it is damaged."""
-    path = run.path / STATE_FILE
-    if not path.is_file():
-        raise PecliError(f"run '{run.name}' is not a self-play run (no {STATE_FILE}): resume it with `pecli train`")
-    data = read_json(path, "self-play state")
-    try:
-        return SelfPlayState.from_dict(data)
-    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
-        raise PecliError(f"{path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
 
 
 def write_averages(run: Run, state: SelfPlayState, scenario: Scenario) -> None:
@@ -221,27 +127,6 @@ def turn_seed(seed: int, round: int, role: Role, kind: str = MAIN) -> int:
 def _wins(role: Role, stats: EpisodeStats) -> int:
     """The opponent's wins among the episodes ``stats`` counted for ``role``'s learner."""
     return stats.episodes - stats.captures if role == "pursuer" else stats.captures
-
-
-def checkpoint_name(round: int) -> str:
-    """The name of a learner's checkpoint after ``round``: ``round-003``."""
-    return f"round-{round:03d}"
-
-
-def round_of(checkpoint: Path) -> int | None:
-    """The round whose checkpoint ``checkpoint`` is (``round-003.zip`` → 3); ``None`` for any other name."""
-    number = checkpoint.stem.removeprefix("round-")
-    return int(number) if checkpoint.stem != number and number.isdigit() else None
-
-
-def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:
-    """Pools holding the baselines of each role: generation 0."""
-    sp = scenario.training.selfplay
-    pools = {role: OpponentPool(role) for role in ROLES}
-    for role in ROLES:
-        for name in builtin_names(role, paper_only=sp.opponents not in LEAGUES):  # a league keeps pecli's adversaries
-            pools[role].add(name, name, generation=0)
-    return SelfPlayState(seed=seed, curriculum_steps=sp.rounds * sp.steps_per_round, pools=pools)
 
 
 class Learner:
@@ -308,77 +193,10 @@ class SelfPlay:
             self.state = replace(initial_state(job.scenario, job.seed), cpu_hours=None if job.cpu_hours == KEEP else job.cpu_hours)
             self.run_dir = Run.create(job.zoo, job.name, job.scenario, {"command": "selfplay", "seed": job.seed})
             self._save_state()
-        self._policies: dict[tuple[Role, str], Policy] = {}
+        self.players = PoolPlayers(self.run_dir.path, self.scenario, job.seed)  # the pools' frozen players
+        self.opponents = opponent_rule(self.settings, self.players, job.zoo)  # whom each turn's learner meets
         self.learners: dict[Role, Learner] = {}  # the main learner of each side
         self.exploiters: dict[Role, Learner] = {}  # a league's exploiters
-
-    # -- pools -------------------------------------------------------------------------------
-    def _policy(self, role: Role, spec: str) -> Policy:
-        """The frozen policy of a pool entry, loaded once per process."""
-        key = (role, spec)
-        if key not in self._policies:
-            self._policies[key] = resolve_policy(self._entry_spec(spec), role, self.scenario, seed=self.job.seed)
-        return self._policies[key]
-
-    def _entry_spec(self, spec: str) -> str:
-        """The policy string of a pool entry of ``selfplay.json``: a checkpoint inside the run (run-relative) or a
-        built-in, checked (:func:`~pecli.policies.registry.recorded_policy`): a run from elsewhere is data."""
-        target = str(self.run_dir.path / spec) if spec.endswith(".zip") else spec
-        return recorded_policy(target, self.run_dir.path, f"{self.run_dir.path / STATE_FILE}")
-
-    def _mixed(self, role: Role) -> MixedPolicy:
-        pool = self.state.pools[role]
-        if not pool.entries:
-            raise PecliError(f"the {role} pool of run '{self.run_dir.name}' is empty (damaged {STATE_FILE}?)")
-        members = [self._policy(role, e.spec) for e in pool.entries]
-        return MixedPolicy(role, members, [e.name for e in pool.entries])
-
-    def _priors(self, learner: Role) -> dict[str, float]:
-        """PFSP priors: each entry's predicted win rate against the learner's latest checkpoint, from the
-        newest tournament under the zoo, when it rated both."""
-        latest = self.state.latest(learner)
-        if latest is None or self.settings.opponents not in ("pfsp", "league"):
-            return {}
-        ratings = tournament_ratings(self.job.zoo)
-        mine = ratings.get(str((self.run_dir.path / latest.checkpoint).resolve()))
-        if mine is None or mine.get("role") != learner:
-            return {}
-        other = opponent_of(learner)
-        priors = {}
-        for e in self.state.pools[other].entries:
-            key = str((self.run_dir.path / e.spec).resolve()) if e.spec.endswith(".zip") else f"{other}:{e.spec}"
-            if key in ratings and ratings[key].get("role") == other:
-                priors[e.name] = predicted_win_rate(ratings[key]["elo"], mine["elo"])
-        return priors
-
-    def _weigher(self, learner: Role) -> Callable[[OpponentPool], np.ndarray]:
-        sp, priors = self.settings, self._priors(learner)
-        nash = self._nash_mixture(opponent_of(learner)) if sp.opponents == "nash" else None
-        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
-                                         sp.league_floor_split, sp.league_exploiter_share, nash)
-
-    def _nash_mixture(self, side: Role) -> dict[str, float]:
-        """``side``'s Nash mixture of the meta-game between the two pools (:mod:`pecli.metagame`), after playing
-        the pairings not yet in the record (``nash_games`` games each, from the same start states; the record is
-        saved with the turn)."""
-        pursuers, evaders = self.state.pools["pursuer"].entries, self.state.pools["evader"].entries
-        missing = [(p, e) for p in pursuers for e in evaders if f"{p.name}|{e.name}" not in self.state.payoffs]
-        if missing:
-            loaded: dict[tuple[Role, str], Policy] = {}  # fresh players: the pools' own are sized for the learner's games
-
-            def player(role: Role, spec: str) -> Policy:
-                if (role, spec) not in loaded:
-                    loaded[role, spec] = resolve_policy(self._entry_spec(spec), role, self.scenario, seed=self.job.seed)
-                return loaded[role, spec]
-
-            for p, e in missing:
-                match, _ = play_match(self.scenario, player("pursuer", p.spec), player("evader", e.spec),
-                                      self.settings.nash_games, seed=self.state.seed)
-                self.state.payoffs[f"{p.name}|{e.name}"] = [int(match.captured.sum()), match.episodes]
-            # saved with the turn (a stop before it plays them again: the pools' records stay as committed)
-        matrix = np.array([[self.state.payoffs[f"{p.name}|{e.name}"][0] / self.state.payoffs[f"{p.name}|{e.name}"][1]
-                            for e in evaders] for p in pursuers])
-        return solve([p.name for p in pursuers], [e.name for e in evaders], matrix).support(side)
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, after_round: Callable[[int], bool] | None = None) -> dict[Role, Path]:
@@ -395,7 +213,7 @@ class SelfPlay:
             beliefs = {role: self.scenario.training.belief != "none" for role in ROLES}
             games = SimultaneousGame(self.scenario, self.scenario.training.n_envs, self.job.seed, history=beliefs)
         for role in ROLES:
-            placeholder = None if simultaneous else self._mixed(opponent_of(role))
+            placeholder = None if simultaneous else self.players.mixture(self.state.pools[opponent_of(role)])
             view = games.faces[role] if games is not None else None
             self.learners[role] = Learner(self.job, role, placeholder, self.run_dir, self.state, view=view)
         records = self.state.records()
@@ -527,16 +345,16 @@ class SelfPlay:
             if self.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
                 pool.decay(sp.pfsp_decay)
             meta_cpu = time.process_time()
-            weigh = self._weigher(role)  # with opponents nash, the meta-game's new pairings play here: their CPU counts
+            weigh = self.opponents.weigher(role, self.state)  # with opponents nash, the meta-game's new pairings play here: their CPU counts
             meta_cpu = time.process_time() - meta_cpu
-            mixed = self._mixed(other)
+            mixed = self.players.mixture(self.state.pools[other])
             mixed.weights = weigh(pool)
             tracker = PoolTracker(pool, mixed, weigh if sp.opponents in ("pfsp", "league") else None)
         else:
             target = self.state.latest(other)
             pool = OpponentPool(other)
             entry = pool.add(f"{other}-r{target.round:03d}", target.checkpoint, generation=target.round)
-            mixed = MixedPolicy(other, [self._policy(other, entry.spec)], [entry.name])
+            mixed = MixedPolicy(other, [self.players.player(other, entry.spec)], [entry.name])
             tracker = PoolTracker(pool, mixed)
             if role not in self.exploiters:  # built at its first turn: a run may have spent hours without exploiters
                 self.exploiters[role] = Learner(self.job, role, mixed, self.run_dir, self.state, kind=EXPLOITER)
@@ -626,7 +444,7 @@ class SelfPlay:
         wins against ``target``, the main agent it trained against: both frozen, from start states seeded by the
         turn (a run resumed inside the turn plays the same games)."""
         learner = self.exploiters[role]
-        captured = play_live(learner.train_job, learner.model, self._policy(opponent_of(role), target),
+        captured = play_live(learner.train_job, learner.model, self.players.player(opponent_of(role), target),
                              self.settings.exploiter_join_games, turn_seed(self.state.seed, r, role, EXPLOITER) + 1)
         return captured if role == "pursuer" else 1 - captured
 
@@ -663,9 +481,10 @@ class SelfPlay:
         relative = str(path.relative_to(self.run_dir.path))
         if kind == MAIN or joined_by:
             self.state.pools[role].add(f"{learner.folder}-r{r:03d}", relative, generation=r)
-        self.state.turns.append(Turn(r, role, int(learner.model.num_timesteps), episodes, captures,
-                                     round(cpu_seconds, 2), relative, pool_size, kind, bool(joined_by), joined_by,
-                                     None if join_rate is None else round(join_rate, 4)))
+        self.state.turns.append(Turn(round=r, role=role, steps=int(learner.model.num_timesteps), episodes=episodes,
+                                     captures=captures, cpu_seconds=round(cpu_seconds, 2), checkpoint=relative,
+                                     opponents=pool_size, learner=kind, joined=bool(joined_by), joined_by=joined_by,
+                                     join_rate=None if join_rate is None else round(join_rate, 4)))
 
     def _save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())

@@ -208,6 +208,23 @@ def hostile_records(out: Path, clean: Path) -> None:
             edit_json(run / "pursuer" / "final.json", **changes)
         return setup
 
+    def huge_graph(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        """An export whose graph asks ONNX Runtime for a 10^6 x 10^6 tensor, its sidecar's hash made to match."""
+        import numpy as np
+        from onnx import TensorProto, helper, numpy_helper
+
+        from pecli.runtime import file_sha256, sidecar_path
+
+        subprocess.run([sys.executable, "-m", "pecli", "export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2"],
+                       check=True, capture_output=True, cwd=zoo)
+        model = run / "pursuer" / "final.onnx"
+        shape = numpy_helper.from_array(np.array([10**6, 10**6], np.int64), "shape")
+        graph = helper.make_graph([helper.make_node("ConstantOfShape", ["shape"], ["action"])], "g",
+                                  [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", 1, 1])],
+                                  [helper.make_tensor_value_info("action", TensorProto.FLOAT, None)], [shape])
+        model.write_bytes(helper.make_model(graph).SerializeToString())
+        edit_json(sidecar_path(model), model_sha256=file_sha256(model))
+
     def text(relative: str, body: str):
         def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
             (run / relative).write_text(body)
@@ -226,6 +243,8 @@ def hostile_records(out: Path, clean: Path) -> None:
         case("run.json nested 100000 deep", text("run.json", deep), resume),
         case("state.json nested 100000 deep", text("pursuer/resume/state.json", deep), resume),
         case("config.yaml nested 20000 deep", text("config.yaml", "a: " + "[" * 20_000 + "]" * 20_000), resume),
+        case("export: ConstantOfShape [10^6, 10^6]", huge_graph,
+             ["play", "-p", "{run}/pursuer/final.onnx", "-e", "greedy", "-n", "4"]),
         case("--set rounds of 5000 digits", lambda *a: None,
              ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000, "--zoo", "{zoo}/new"]),
         case("--zoo with markup z[/x]", lambda *a: None,

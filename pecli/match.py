@@ -82,7 +82,8 @@ class Recording:
             self, pursuer=self.pursuer[:, index], evader=self.evader[:, index],
             seen_by_pursuer=self.seen_by_pursuer[:, index], seen_by_evader=self.seen_by_evader[:, index],
             steps=self.steps[index], captured=self.captured[index],
-            beliefs={role: tuple(part[:, index] for part in parts) for role, parts in self.beliefs.items()})
+            beliefs={role: (weights[:, index], means[:, index], stds[:, index])
+                     for role, (weights, means, stds) in self.beliefs.items()})
 
 
 @dataclass(frozen=True)

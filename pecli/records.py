@@ -7,7 +7,7 @@ not one ends in one line naming the field). Torch-free: reading a record loads n
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -94,17 +94,21 @@ class SelfPlayRecord(_Record):
 
     @model_validator(mode="after")
     def _payoffs_are_games(self) -> SelfPlayRecord:
-        for key, value in self.payoffs.items():
-            captures, games = (value + [-1, -1])[:2] if len(value) == 2 else (-1, -1)
-            if not 0 <= captures <= games or not 1 <= games <= MAX_COUNT or len(key) > 2 * MAX_TEXT + 1:
-                raise ValueError(f"payoffs: {captures} captures in {games} games ({key[:40]})")
+        for key, value in self.payoffs.items():  # [captures, games] of one pairing
+            if len(value) != 2 or not 0 <= value[0] <= value[1] or not 1 <= value[1] <= MAX_COUNT:
+                raise ValueError(f"payoffs: {value[:2]} is no [captures, games] ({key[:40]})")
+            if len(key) > 2 * MAX_TEXT + 1:
+                raise ValueError("payoffs: a pairing's name is too long")
         for role, pool in self.pools.items():
             if pool.role != role:
                 raise ValueError(f"pools: the {role} pool says it is the {pool.role}'s")
         return self
 
 
-def validated(model: type[_Record], data: object, path: object, what: str) -> _Record:
+RecordT = TypeVar("RecordT", bound=BaseModel)
+
+
+def validated(model: type[RecordT], data: object, path: object, what: str) -> RecordT:
     """``data`` as ``model``, or :class:`PecliError` in one line naming the first field that is wrong."""
     try:
         return model.model_validate(data)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from pecli.errors import ExportError
+from pecli.onnx_guard import MAX_MODEL_BYTES, check_graph
 
 FORMAT = "pecli-onnx/1"
 SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
@@ -121,6 +122,8 @@ class ExportedModel:
         path = Path(path)
         if not path.is_file():
             raise ExportError(f"no exported model at {path}")
+        if path.stat().st_size > MAX_MODEL_BYTES:
+            raise ExportError(f"{path}: {path.stat().st_size:,} bytes, more than an export ever is")
         sidecar = read_sidecar(path)
         if sidecar.get("model_sha256") != file_sha256(path):
             raise ExportError(f"{path} does not match its sidecar {sidecar_path(path).name} (SHA-256 differs): "
@@ -135,6 +138,7 @@ class ExportedModel:
         except ImportError:
             raise ExportError("exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')") from None
 
+        check_graph(model, source)  # only an export's operators and sizes (with the onnx package)
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1

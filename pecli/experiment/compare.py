@@ -49,7 +49,7 @@ class RunPlayers:
         return self.pursuer if role == "pursuer" else self.evader
 
 
-def _main_turns(state: Path) -> tuple[dict[tuple[int, str], Path], list[dict]]:
+def _main_turns(state: Path) -> tuple[dict[tuple[int, Role], Path], list[dict]]:
     """Each main turn's checkpoint by (round, role), and every turn as recorded; :class:`PecliError` if damaged."""
     record = validated(SelfPlayRecord, read_json(state, "self-play record"), state, "self-play record")
     main = {(t.round, t.role): state.parent / t.checkpoint for t in record.turns if t.learner == "main"}
@@ -245,16 +245,18 @@ def compare_arms(arms: dict[str, dict[str, RunPlayers]], scenario: Scenario, out
     player.update({(first, o, "evader"): of[arms[first][o].evader] for o in bystanders})
     scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
     pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
-    found = {"pursuer": [*found["pursuer"], pure], "evader": [*found["evader"], *scripted.values()]}
-    met = {n: [*scripted, *((label, o) for label in arms for o in names if o != n), *((first, o) for o in bystanders)]
-           for n in names}
+    players: dict[Role, list[Player]] = {"pursuer": [*found["pursuer"], pure],
+                                         "evader": [*found["evader"], *scripted.values()]}
+    met: dict[str, list[str | tuple[str, str]]] = {
+        n: [*scripted, *((label, o) for label in arms for o in names if o != n), *((first, o) for o in bystanders)]
+        for n in names}
 
     def evader(key: str | tuple[str, str]) -> Player:
         return scripted[key] if isinstance(key, str) else player[(*key, "evader")]
 
     pairings = [(player[(label, n, "pursuer")], evader(e)) for label in arms for n in names for e in met[n]]
     pairings += [(pure, player[(label, n, "evader")]) for label in arms for n in names]
-    results = run_tournament(scenario, found, pairings, episodes=episodes, seeds=[0], out=out, workers=workers).grid()
+    results = run_tournament(scenario, players, pairings, episodes=episodes, seeds=[0], out=out, workers=workers).grid()
     result = Comparison(list(arms), names, bystanders, episodes)
     for label in arms:
         for n in names:

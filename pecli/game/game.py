@@ -139,7 +139,9 @@ class Game:
         valid = dist > self.scenario.capture_distance
         choice = np.where(valid.any(axis=0), valid.argmax(axis=0), dist.argmax(axis=0))
         cols = np.arange(idx.size)
-        for role, (x, y), yaw in (("pursuer", (px, py), u[-2]), ("evader", (ex, ey), u[-1])):
+        placements: tuple[tuple[Role, tuple[np.ndarray, np.ndarray], np.ndarray], ...] = (
+            ("pursuer", (px, py), u[-2]), ("evader", (ex, ey), u[-1]))
+        for role, (x, y), yaw in placements:
             rows, dynamics = getattr(self, role), self.dynamics[role]
             start = np.zeros((dynamics.state_dim, idx.size))
             start[0], start[1] = x[choice, cols], y[choice, cols]
@@ -243,7 +245,7 @@ class Game:
         p_sensor, e_sensor = self.scenario.pursuer.sensor, self.scenario.evader.sensor
         seen_p = in_view(dx, dy, distance, p_dyn.heading_cos_sin(pursuer), self.fov["pursuer"], p_sensor.range)
         seen_e = in_view(-dx, -dy, distance, e_dyn.heading_cos_sin(evader), self.fov["evader"], e_sensor.range)
-        obs = {
+        obs: dict[Role, np.ndarray] = {
             "pursuer": self.codecs["pursuer"].encode(pursuer, evader, dx, dy, seen_p, time_fraction),
             "evader": self.codecs["evader"].encode(evader, pursuer, -dx, -dy, seen_e, time_fraction),
         }

@@ -38,4 +38,6 @@ def counter_uniform(seed: int, slots: np.ndarray, episodes: np.ndarray, draws: i
 
 def fresh_seed() -> int:
     """A seed drawn from the operating system's entropy."""
-    return int(np.random.SeedSequence().entropy % 2**63)
+    entropy = np.random.SeedSequence().entropy
+    assert isinstance(entropy, int)  # drawn from the OS, it is one number
+    return entropy % 2**63

@@ -279,10 +279,10 @@ class SingleGame:
         values = np.asarray(state, dtype=np.float64)
         if values.shape not in ((self.state_dim,), (1, self.state_dim)):
             raise ValueError(f"state must have shape {(self.state_dim,)}, got {values.shape}")
-        values = values.reshape(-1).tolist()
+        row = values.reshape(-1).tolist()
         k = self._pursuer.state_dim
-        self._pursuer.set_state(values[:k])
-        self._evader.set_state(values[k:])
+        self._pursuer.set_state(row[:k])
+        self._evader.set_state(row[k:])
         self.t = int(t)
         self.finished = False
         return self.observe()
@@ -389,7 +389,7 @@ class SingleGame:
         else:
             p_block = self._relative(p, e, dx, dy, "pursuer") if seen_p else self._unseen["pursuer"]
             e_block = self._relative(e, p, -dx, -dy, "evader") if seen_e else self._unseen["evader"]
-        obs = {
+        obs: dict[Role, np.ndarray] = {
             "pursuer": np.array(p_norm + p_block + [1.0 if seen_p else -1.0, time_fraction], dtype=np.float32),
             "evader": np.array(e_norm + e_block + [1.0 if seen_e else -1.0, time_fraction], dtype=np.float32),
         }

@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from pecli.rl.pool import EXPLOITER, LEAGUES, MAIN
-from pecli.roles import ROLES
+from pecli.roles import ROLES, Role
 
 if TYPE_CHECKING:
     from pecli.scenario import SelfPlay as SelfPlaySettings
@@ -27,7 +27,7 @@ def cpu_through(turns: Turns, round: float) -> float:
     return sum(float(t.get("cpu_seconds", 0.0)) for t in turns if int(t.get("round", 0)) <= round)
 
 
-def scheduled_turns(settings: SelfPlaySettings, turns: Turns, round: int) -> list[tuple[str, str]]:
+def scheduled_turns(settings: SelfPlaySettings, turns: Turns, round: int) -> list[tuple[str, Role]]:
     """The ``(learner, role)`` turns of ``round``: both main learners, then the sides of ``league_exploiter_roles``
     in every ``league_exploiter_every``-th round of a league (never if 0), once the rounds before it spent
     ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""

@@ -31,7 +31,7 @@ class SelfPlayState:
 
     seed: int
     curriculum_steps: int  # the span the curriculum is scheduled over (fixed when the run starts)
-    pools: dict[str, OpponentPool]
+    pools: dict[Role, OpponentPool]
     turns: list[Turn] = field(default_factory=list)
     cpu_hours: float | None = None  # the CPU budget: the run stops after the first round that reaches it
     payoffs: dict[str, list[int]] = field(default_factory=dict)  # opponents nash: "pursuer|evader" -> [captures, games]
@@ -79,7 +79,7 @@ def read_state(run: Run) -> SelfPlayState:
     if not path.is_file():
         raise PecliError(f"run '{run.name}' is not a self-play run (no {STATE_FILE}): resume it with `pecli train`")
     record = validated(SelfPlayRecord, read_json(path, "self-play state"), path, "self-play state")
-    return SelfPlayState.from_record(record)  # type: ignore[arg-type]
+    return SelfPlayState.from_record(record)
 
 
 def checkpoint_name(round: int) -> str:

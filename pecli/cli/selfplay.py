@@ -112,7 +112,6 @@ def selfplay(
         seed = 0 if seed is None else seed
     if settings:
         scenario = with_overrides(scenario, settings, source="options")
-    sp = scenario.training.selfplay
     job = SelfPlayJob(
         scenario=scenario,
         zoo=zoo,
@@ -128,22 +127,14 @@ def selfplay(
         with sigterm_stops():
             loop = SelfPlay(job, report=lambda line: err_console.print(line, highlight=False))
             before = len(loop.state.turns)
-            used = f" ({loop.state.cpu_seconds() / 3600:.2f} used)" if loop.state.turns else ""
-            budget = "" if loop.state.cpu_hours is None else f" or {loop.state.cpu_hours:g} CPU-h{used}, whichever comes first,"
-            err_console.print(
-                f"self-play [bold]{loop.run_dir.path}[/]: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of {sp.steps_per_round:,} steps per side"
-                f"{budget} on {scenario.name}, {sp.schedule}" + (f", opponents {sp.opponents}" if sp.schedule == "alternating" else "")
-                + f", belief {scenario.training.belief}", highlight=False)
+            err_console.print(loop.plan(), highlight=False)
             final = loop.run()
     except SelfPlayInterrupted as stop:
         err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
                           f"continue with --resume --name {job.name}", highlight=False)
         raise typer.Exit(code=130) from None
     if len(loop.state.turns) == before:
-        limits = [flag for flag, reached in (("--cpu-hours", loop.budget_reached()),
-                                             ("--rounds", loop.whole_rounds() >= sp.rounds)) if reached]
-        verb = "continue" if len(limits) > 1 else "continues"
-        err_console.print(f"nothing to train: a larger {' and '.join(limits) or '--rounds'} {verb} the run", highlight=False)
+        err_console.print(loop.nothing_trained(), highlight=False)
     averages = loop.averages()
     for role, path in final.items():
         rounds = len(averaged_from(averages[role]) or []) if role in averages else 0

@@ -255,6 +255,23 @@ class SelfPlay:
                 f"{self.state.cpu_hours:g} "
                 f"CPU-h after round {rounds}")
 
+    def plan(self) -> str:
+        """What the run will do, in one line: rounds, steps, budget, schedule, opponents and belief."""
+        sp, state = self.settings, self.state
+        used = f" ({state.cpu_seconds() / 3600:.2f} used)" if state.turns else ""
+        budget = "" if state.cpu_hours is None else f" or {state.cpu_hours:g} CPU-h{used}, whichever comes first,"
+        opponents = f", opponents {sp.opponents}" if sp.schedule == "alternating" else ""
+        return (f"self-play {self.run_dir.path}: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of "
+                f"{sp.steps_per_round:,} steps per side{budget} on {self.scenario.name}, {sp.schedule}{opponents}, "
+                f"belief {self.scenario.training.belief}")
+
+    def nothing_trained(self) -> str:
+        """Why a call trained nothing, and which option continues the run."""
+        limits = [flag for flag, reached in (("--cpu-hours", self.budget_reached()),
+                                             ("--rounds", self.whole_rounds() >= self.settings.rounds)) if reached]
+        verb = "continue" if len(limits) > 1 else "continues"
+        return f"nothing to train: a larger {' and '.join(limits) or '--rounds'} {verb} the run"
+
     def averages(self) -> dict[Role, Path]:
         """Each main learner's ``average.zip`` (the mean of its last ``average_last`` rounds), where there is one."""
         paths = {role: self.run_dir.path / role / AVERAGE_FILE for role in ROLES}

@@ -11,6 +11,7 @@ import pytest
 from pecli.errors import ConfigError
 from pecli.match import play_match
 from pecli.policies import resolve_policy
+from pecli.rl import schedules as schedules_module
 from pecli.rl import selfplay as selfplay_module
 from pecli.rl.pool import OpponentPool
 from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob
@@ -225,7 +226,7 @@ def test_join_games_decide_whether_an_exploiter_joins(quick: Scenario, tmp_path:
 
 def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     built: dict[str, int] = {}
-    original = selfplay_module.Learner
+    original = schedules_module.Learner
 
     class Stopping(original):
         def __init__(self, job, role, *args, kind=selfplay_module.MAIN, **kwargs) -> None:
@@ -235,7 +236,7 @@ def test_a_stop_after_an_exploiter_joined_starts_it_afresh(quick: Scenario, tmp_
                     raise KeyboardInterrupt
             super().__init__(job, role, *args, kind=kind, **kwargs)
 
-    monkeypatch.setattr(selfplay_module, "Learner", Stopping)
+    monkeypatch.setattr(schedules_module, "Learner", Stopping)
     with pytest.raises(SelfPlayInterrupted):
         SelfPlay(job(quick, tmp_path)).run()
     monkeypatch.undo()

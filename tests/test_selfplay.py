@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 from pecli.cli import app
 from pecli.policies.heuristics import Greedy
 from pecli.policies.mixed import MixedPolicy
-from pecli.rl import selfplay as selfplay_module
+from pecli.rl import schedules as schedules_module
 from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
 from pecli.rl.train import with_overrides
@@ -241,19 +241,19 @@ def test_an_interrupted_run_resumes_inside_its_turn(quick: Scenario, tmp_path: P
     SelfPlay(job(quick, tmp_path / "ref", "sp", **settings)).run()
     reference = tmp_path / "ref" / "sp"
     if case == "commit-window":
-        original_save = SelfPlay._save_state
+        original_save = SelfPlay.save_state
 
         def stop_before_commit(self: SelfPlay) -> None:
             if len(self.state.turns) == 3:  # (2, pursuer) is written but not yet committed
                 raise KeyboardInterrupt
             original_save(self)
 
-        monkeypatch.setattr(SelfPlay, "_save_state", stop_before_commit)
+        monkeypatch.setattr(SelfPlay, "save_state", stop_before_commit)
         expected = (2, "pursuer")
     else:
         started: list[str] = []
 
-        class Interrupting(selfplay_module.PoolTracker):
+        class Interrupting(schedules_module.PoolTracker):
             def _on_step(self) -> bool:
                 if self.pool.role == "pursuer" and started.count("evader") == 2 and self.num_timesteps > 300:
                     raise KeyboardInterrupt  # round 2, while the evader trains
@@ -262,7 +262,7 @@ def test_an_interrupted_run_resumes_inside_its_turn(quick: Scenario, tmp_path: P
             def _on_training_start(self) -> None:
                 started.append("evader" if self.pool.role == "pursuer" else "pursuer")
 
-        monkeypatch.setattr(selfplay_module, "PoolTracker", Interrupting)
+        monkeypatch.setattr(schedules_module, "PoolTracker", Interrupting)
         expected = (2, "evader")
     with pytest.raises(SelfPlayInterrupted) as stop:
         SelfPlay(job(quick, tmp_path, "sp", **settings)).run()

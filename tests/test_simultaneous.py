@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch as th
 
-from pecli.rl import selfplay as selfplay_module
+from pecli.rl import durable as durable_module
+from pecli.rl import schedules as schedules_module
 from pecli.rl.selfplay import SelfPlay, SelfPlayInterrupted, SelfPlayJob, read_state
 from pecli.rl.train import with_overrides
 from pecli.scenario import Scenario
@@ -83,12 +84,12 @@ def test_both_learners_learn_from_the_same_steps(quick: Scenario, tmp_path: Path
 
 def test_a_round_stopped_inside_resumes_there_the_same_way_twice(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     calls = {"n": 0}
-    original = selfplay_module.learn_simultaneously
+    original = schedules_module.learn_simultaneously
 
     def interrupted(models, steps, callbacks):
         calls["n"] += 1
         if calls["n"] == 2:  # round 2, part way
-            class Stop(selfplay_module.EpisodeStats):
+            class Stop(schedules_module.EpisodeStats):
                 def _on_step(self) -> bool:
                     if self.num_timesteps > 480:
                         raise KeyboardInterrupt
@@ -97,7 +98,7 @@ def test_a_round_stopped_inside_resumes_there_the_same_way_twice(quick: Scenario
             callbacks["evader"].append(Stop())
         return original(models, steps, callbacks)
 
-    monkeypatch.setattr(selfplay_module, "learn_simultaneously", interrupted)
+    monkeypatch.setattr(schedules_module, "learn_simultaneously", interrupted)
     with pytest.raises(SelfPlayInterrupted):
         SelfPlay(job(quick, tmp_path)).run()
     monkeypatch.undo()
@@ -124,8 +125,8 @@ def _policy(path: Path) -> list[th.Tensor]:
 
 def test_a_stop_while_committing_counts_the_rounds_cpu_once(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     ticks = iter(range(1, 1000))  # a CPU clock that advances one second per reading
-    monkeypatch.setattr(selfplay_module, "time", type("Clock", (), {"process_time": staticmethod(lambda: next(ticks))}))
-    original = selfplay_module.DurableState.save
+    monkeypatch.setattr(schedules_module, "time", type("Clock", (), {"process_time": staticmethod(lambda: next(ticks))}))
+    original = durable_module.DurableState.save
 
     def stopped_once(self, *args, **kwargs):  # Ctrl-C lands while the evader's state is being written
         if self.directory.parent.name == "evader" and not getattr(stopped_once, "done", False):
@@ -133,7 +134,7 @@ def test_a_stop_while_committing_counts_the_rounds_cpu_once(quick: Scenario, tmp
             raise KeyboardInterrupt
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(selfplay_module.DurableState, "save", stopped_once)
+    monkeypatch.setattr(durable_module.DurableState, "save", stopped_once)
     with pytest.raises(SelfPlayInterrupted):
         SelfPlay(job(quick, tmp_path)).run()
     spent = next(ticks) - 2  # the clock's last reading (by the commit after the stop) less its first (round start)

@@ -103,9 +103,9 @@ class Behaviour:
     def of(cls, recording: Recording) -> Behaviour:
         evader, pursuer = recording.evader[..., :2], recording.pursuer[..., :2]
         alive = np.arange(len(evader))[:, None] < recording.steps[None, :]  # (T1, r): the steps each game ran
-        moved = alive[1:]
+        moved = alive[:-1]  # the move from frame t to t + 1 happened if the game ran step t
         speed = np.linalg.norm(np.diff(evader, axis=0), axis=2)
-        sees = recording.seen_by_evader[1:]
+        sees = recording.seen_by_evader[:-1]  # what the evader saw when it chose that move
         wall = np.min(np.asarray(recording.scenario.arena.half) - np.abs(evader), axis=2)
 
         def mean(values: np.ndarray) -> float:

@@ -15,12 +15,14 @@ from pecli.errors import PecliError
 from pecli.roles import Role
 
 MAX_ROUNDS = 1_000_000
-MAX_COUNT = 10**13  # transitions or games a record may count
+MAX_COUNT = 10**16  # transitions or games a record may count (a scenario's rounds x steps per round, at most)
 MAX_CPU_SECONDS = 3.6e7  # 10 000 CPU-hours
 MAX_ENTRIES = 100_000  # opponents in one pool, turns in one run
 MAX_TEXT = 4096  # a name, a policy string, a run-relative path
 
 Learner = Literal["main", "exploiter"]
+# a checkpoint a record names: inside the run, in a learner's folder (no path out of it)
+CHECKPOINT = r"^(exploiter-)?(pursuer|evader)/[A-Za-z0-9_.-]{1,200}\.zip$"
 
 
 class _Record(BaseModel):
@@ -49,7 +51,7 @@ class Turn(_Record):
     episodes: int = Field(ge=0, le=MAX_COUNT)
     captures: int = Field(ge=0, le=MAX_COUNT)
     cpu_seconds: float = Field(ge=0.0, le=MAX_CPU_SECONDS)
-    checkpoint: str = Field(max_length=MAX_TEXT)  # run-relative
+    checkpoint: str = Field(pattern=CHECKPOINT)  # run-relative: <role>/<name>.zip or exploiter-<role>/<name>.zip
     opponents: int = Field(ge=0, le=MAX_ENTRIES)  # entries in the opponents' pool during the turn
     learner: Learner = "main"  # main, or exploiter (league)
     joined: bool = False  # an exploiter's checkpoint joined its side's pool
@@ -96,9 +98,11 @@ class SelfPlayRecord(_Record):
     def _payoffs_are_games(self) -> SelfPlayRecord:
         for key, value in self.payoffs.items():  # [captures, games] of one pairing
             if len(value) != 2 or not 0 <= value[0] <= value[1] or not 1 <= value[1] <= MAX_COUNT:
-                raise ValueError(f"payoffs: {value[:2]} is no [captures, games] ({key[:40]})")
+                raise ValueError(f"payoffs: {str(value)[:60]} is no [captures, games] ({key[:40]})")
             if len(key) > 2 * MAX_TEXT + 1:
                 raise ValueError("payoffs: a pairing's name is too long")
+        if set(self.pools) != {"pursuer", "evader"}:
+            raise ValueError(f"pools: one for each role, not {sorted(self.pools)}")
         for role, pool in self.pools.items():
             if pool.role != role:
                 raise ValueError(f"pools: the {role} pool says it is the {pool.role}'s")

@@ -31,7 +31,7 @@ def fake_run(zoo: Path, name: str, cpu_per_round: float, rounds: int) -> Path:
             (run / role).mkdir(parents=True, exist_ok=True)
             (run / role / f"round-{r:03d}.zip").write_bytes(b"w")
             turns.append(turn(r, role, f"{role}/round-{r:03d}.zip", cpu_per_round / 2))
-    turns.append(turn(1, "evader", "exploiters/x.zip", 0.0, learner="exploiter"))
+    turns.append(turn(1, "evader", "exploiter-evader/round-001.zip", 0.0, learner="exploiter"))
     pools = {role: {"role": role, "entries": []} for role in ("pursuer", "evader")}
     (run / "selfplay.json").write_text(json.dumps({"seed": 0, "curriculum_steps": 0, "pools": pools, "turns": turns}))
     return run

@@ -26,15 +26,31 @@ def huge_header() -> TensorProto:
     return tensor
 
 
+def with_sparse_or_external(kind: str) -> bytes:
+    """A graph with a sparse constant of 10^12 elements, or a constant read from another file."""
+    model = onnx.load_from_string(graph([helper.make_node("Relu", ["obs"], ["y"])]))
+    if kind == "sparse":
+        values = numpy_helper.from_array(np.ones(1, np.float32), "s")
+        indices = numpy_helper.from_array(np.zeros(1, np.int64), "i")
+        model.graph.sparse_initializer.append(helper.make_sparse_tensor(values, indices, [10**6, 10**6]))
+    else:
+        tensor = numpy_helper.from_array(np.ones(4, np.float32), "w")
+        tensor.ClearField("raw_data")
+        tensor.data_location = TensorProto.EXTERNAL
+        tensor.external_data.add(key="location", value="weights.bin")
+        model.graph.initializer.append(tensor)
+    return model.SerializeToString()
+
+
 def test_a_small_plain_graph_passes() -> None:
     check_graph(graph([helper.make_node("Relu", ["obs"], ["y"])]))
 
 
 @pytest.mark.parametrize(("model", "says"), [
     (graph([helper.make_node("ConstantOfShape", ["shape"], ["y"])],
-           [numpy_helper.from_array(np.array([10**6, 10**6], np.int64), "shape")]), "ConstantOfShape of shape"),
+           [numpy_helper.from_array(np.array([10**6, 10**6], np.int64), "shape")]), "ConstantOfShape of"),
     (graph([helper.make_node("Constant", [], ["shape"], value=numpy_helper.from_array(np.array([10**5, 10**5]))),
-            helper.make_node("Expand", ["obs", "shape"], ["y"])]), "Expand of shape"),
+            helper.make_node("Expand", ["obs", "shape"], ["y"])]), "Expand of"),
     (graph([helper.make_node("Tile", ["obs", "r"], ["y"])],
            [numpy_helper.from_array(np.array([10**4, 10**4], np.int64), "r")]), "Tile of repeats"),
     (graph([helper.make_node("Range", ["a", "b", "c"], ["y"])],
@@ -45,6 +61,17 @@ def test_a_small_plain_graph_passes() -> None:
     (graph([helper.make_node("Relu", ["obs"], ["y"], domain="com.evil")]), "another domain"),
     (graph([helper.make_node("Add", ["obs", "w"], ["y"])],
            [huge_header()]), "a constant of shape"),
+    (graph([helper.make_node("Constant", [], ["a"], value=numpy_helper.from_array(np.array([10**6, 10**6]))),
+            helper.make_node("Identity", ["a"], ["b"]), helper.make_node("ConstantOfShape", ["b"], ["y"])]),
+     "Identity of"),
+    (graph([helper.make_node("Constant", [], ["a"], value_ints=[4096]),
+            helper.make_node("Concat", ["a", "a", "a"], ["b"], axis=0),
+            helper.make_node("ConstantOfShape", ["b"], ["y"])]), "ConstantOfShape of shape"),
+    (graph([helper.make_node("Shape", ["obs"], ["s"]), helper.make_node("Constant", [], ["k"], value_ints=[10**7]),
+            helper.make_node("Concat", ["s", "k"], ["b"], axis=0), helper.make_node("Expand", ["obs", "b"], ["y"])]),
+     "value_ints"),
+    (with_sparse_or_external("sparse"), "sparse constants"),
+    (with_sparse_or_external("external"), "stored in another file"),
     (b"\x00not a model", "not an ONNX model"),
     (b"\x00" * (MAX_MODEL_BYTES + 1), "more than an export ever is"),
 ])

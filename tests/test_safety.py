@@ -110,6 +110,36 @@ def test_a_payload_in_the_weights_is_refused(zoo: Path, tmp_path: Path) -> None:
     assert not marker.exists()
 
 
+def pickled_where_older_pecli_kept_them(path: Path) -> None:
+    """Save the checkpoint again with its classes pickled under the modules an older pecli had (``pecli.rl.policies``)."""
+    import sys
+    import zipfile
+
+    from stable_baselines3 import TD3
+
+    import pecli.models.extractors as extractors
+    import pecli.models.policies as policies
+
+    model = TD3.load(path)  # our own file, written by this test's zoo
+    modules = {f"pecli.rl.{m.__name__.rpartition('.')[2]}": m for m in (policies, extractors)}
+    classes = {c: c.__module__ for m in modules.values() for c in vars(m).values()
+               if isinstance(c, type) and c.__module__ == m.__name__}
+    try:
+        for old, module in modules.items():
+            sys.modules[old] = module
+        for c in classes:
+            c.__module__ = c.__module__.replace("pecli.models.", "pecli.rl.")
+        model.save(path)
+    finally:
+        for c, module in classes.items():
+            c.__module__ = module
+        for old in modules:
+            sys.modules.pop(old, None)
+    with zipfile.ZipFile(path) as archive:
+        assert b"pecli.rl.policies" in __import__("base64").b64decode(
+            json.loads(archive.read("data"))["policy_class"][":serialized:"])
+
+
 def test_a_checkpoint_of_an_older_pecli_needs_trust(zoo: Path, tmp_path: Path, monkeypatch) -> None:
     """Metadata without a network description: only unpickling can rebuild it."""
     monkeypatch.setenv("PECLI_TRUST", "0")  # and restored after the test, which sets it through --trust
@@ -119,6 +149,7 @@ def test_a_checkpoint_of_an_older_pecli_needs_trust(zoo: Path, tmp_path: Path, m
     meta = json.loads(meta_path.read_text())
     del meta["policy_kwargs"]
     meta_path.write_text(json.dumps(meta))
+    pickled_where_older_pecli_kept_them(meta_path.with_suffix(".zip"))
     command = ["play", "-p", str(meta_path.with_suffix(".zip")), "-e", "greedy", "-n", "4"]
     refused = runner.invoke(app, command)
     assert refused.exit_code == 1 and "written before pecli described networks" in refused.output

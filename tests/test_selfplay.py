@@ -341,6 +341,9 @@ def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
     assert result.exit_code == 1 and "only --rounds can change" in result.output
     result = invoke(*common, "--name", "nope")
     assert result.exit_code == 1 and "no run 'nope'" in result.output
+    for bad in ("abc", "null", "true"):  # refused as a setting, not compared with the rounds played
+        result = invoke(*common, "--name", "cli", "--set", f"selfplay.rounds={bad}")
+        assert result.exit_code == 1 and "selfplay.rounds" in result.output and "internal" not in result.output
     result = invoke(*common)
     assert result.exit_code == 1 and "--resume needs the --name" in result.output
     (tmp_path / "cli" / "selfplay.json").write_text("{")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -27,6 +28,7 @@ from pecli.match import Behaviour, play_match
 from pecli.policies import builtin_names, resolve_policy
 
 MAX_BEHAVIOUR = 10_000  # episodes recorded whole for --behaviour
+MAX_FRAMES = 10_000_000  # and their steps in all (a few hundred MB of states)
 POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
 
 
@@ -61,6 +63,9 @@ def play(
     require_batch(episodes, "play fewer (a tournament plays more over several --seeds)")
     if behaviour and episodes > MAX_BEHAVIOUR:
         raise PecliError(f"--behaviour records every episode: play at most {MAX_BEHAVIOUR:,}")
+    if behaviour and episodes * (scenario_horizon := scenario_for([pursuer, evader], config).horizon) > MAX_FRAMES:
+        raise PecliError(f"--behaviour records every step of every episode: at most {MAX_FRAMES:,} steps in all, "
+                         f"not {episodes:,} x {scenario_horizon:,}")
     if render is not None and render.suffix.lower() not in (".png", ".gif"):
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
     if render is not None:
@@ -93,7 +98,9 @@ def play(
 
     seen = Behaviour.of(recording) if behaviour and recording is not None else None
     if as_json:
-        typer.echo(json.dumps(result.summary() | ({"behaviour": dataclasses.asdict(seen)} if seen else {})))
+        behaved = {key: None if math.isnan(value) else value for key, value in dataclasses.asdict(seen).items()} \
+            if seen else None  # a share of no step (never saw it) is no number: null
+        typer.echo(json.dumps(result.summary() | ({"behaviour": behaved} if behaved else {})))
     else:
         table = Table(title=f"{pursuer} vs {evader} on {scenario.name} (seed {seed})")
         table.add_column("episodes", justify="right")

@@ -61,7 +61,7 @@ def selfplay(
                      "pecli's scripted adversaries kept in the pools) or nash (the league, with the Nash mixture of "
                      "the pools' meta-game in place of pfsp: PSRO). Default: the config's, pfsp."),
     ] = None,
-    seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, draws, noise and networks (default 0).")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, draws, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-selfplay-seed-time).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,

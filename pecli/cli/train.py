@@ -47,7 +47,7 @@ def train(
         typer.Option("--belief", help="What the actor knows of the unseen opponent (default: the config's, none)."),
     ] = None,
     steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
-    seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of games, noise and networks (default 0).")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, noise and networks (default 0).")] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-role-seed-time).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,

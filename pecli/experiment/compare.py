@@ -24,6 +24,7 @@ from scipy.stats import ttest_ind, ttest_rel
 from pecli.errors import PecliError
 from pecli.io import file_digest, read_json
 from pecli.records import SelfPlayRecord, validated
+from pecli.rl.handover import STATE_FILE
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import mantel_haenszel_test, two_proportion_z_test
@@ -31,7 +32,6 @@ from pecli.tournament import Player, find_players, run_tournament
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")
-STATE_FILE = "selfplay.json"
 
 Faced = dict[Hashable, dict[Hashable, tuple[int, int]]]  # pursuer -> each evader it met -> (captures, games)
 

@@ -183,6 +183,16 @@ def _mismatch(exc: RuntimeError) -> str:
     return text.splitlines()[0][:200]
 
 
+def _old_module_names() -> None:
+    """Where an older pecli kept the classes its pickled checkpoints name (``pecli.rl.policies``, ...): the same
+    classes, now in :mod:`pecli.models`, so that a trusted old checkpoint still unpickles."""
+    import importlib
+    import sys
+
+    for name in ("algorithms", "buffers", "extractors", "policies", "checkpoint"):
+        sys.modules.setdefault(f"pecli.rl.{name}", importlib.import_module(f"pecli.models.{name}"))
+
+
 def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, device: str = "cpu") -> BasePolicy:
     """The policy of the checkpoint at ``path``, rebuilt from ``meta`` and its weights; unpickles nothing
     unless the checkpoint predates pecli's network metadata and the user trusts it."""
@@ -190,6 +200,7 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
         if not trusted():
             raise untrusted(path, "it was written before pecli described networks in its metadata, "
                                            "so only unpickling can rebuild it")
+        _old_module_names()
         try:
             return get_algorithm(meta.algo).cls.load(path, device=device).policy
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds

@@ -87,7 +87,7 @@ def resume_selfplay(zoo: Path, name: str | None, config: str | None, seed: int |
                     settings: dict[str, Any]) -> tuple[Scenario, int]:
     """The self-play run ``name`` of ``zoo`` as it continues: its scenario and seed; :class:`PecliError` if an
     option changes what a resumed run keeps, or ``selfplay.rounds`` is below the rounds it has played."""
-    from pecli.rl.selfplay import read_state
+    from pecli.rl.state import read_state
 
     run = _open(zoo, name)
     scenario = resumed_scenario(run.scenario(), config, run.name)
@@ -96,6 +96,7 @@ def resume_selfplay(zoo: Path, name: str | None, config: str | None, seed: int |
         raise PecliError(f"run '{run.name}' plays with --seed {state.seed}; a resumed run keeps it")
     _refuse_changes(scenario, settings, "selfplay.rounds")
     played = max((t.round for t in state.turns), default=0)
-    if settings.get("selfplay.rounds", played) < played:
+    rounds = settings.get("selfplay.rounds")  # a value of the wrong kind is refused when the settings are applied
+    if isinstance(rounds, int) and not isinstance(rounds, bool) and rounds < played:
         raise PecliError(f"run '{run.name}' has played {played} rounds already: --rounds must be at least that")
     return scenario, state.seed

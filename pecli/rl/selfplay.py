@@ -38,13 +38,11 @@ from pecli.io import atomic_write_json
 from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints
 from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
-from pecli.rl.learner import (  # noqa: F401 (the run's job and learners, importable from here as before)
+from pecli.rl.learner import (  # noqa: F401 (the run's job and its stop, importable from here)
     KEEP,
     Learner,
     SelfPlayInterrupted,
     SelfPlayJob,
-    opponent_wins,
-    tensorboard_name,
     turn_seed,
 )
 from pecli.rl.opponents import PoolPlayers, opponent_rule

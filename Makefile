@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pecli-installed
 DOCS_STAMP := $(VENV)/.pecli-docs-installed
 
-.PHONY: install demo test docs bench clean
+.PHONY: install demo test lint docs bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -31,7 +31,13 @@ demo: install
 	$(VENV)/bin/pecli play --pursuer $(DEMO_ZOO)/demo/pursuer/final.zip --evader greedy --config configs/quick.yaml \
 		--episodes 1 --seed 1 --render runs/demo.gif
 
-test: install
+# Lint (ruff: rules and format) and types (mypy on the core packages, listed in pyproject.toml), then the suite.
+lint: install
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+	$(PY) -m mypy
+
+test: lint
 	$(PY) -m pytest -q
 
 $(DOCS_STAMP): $(STAMP)

@@ -73,8 +73,10 @@ def speed(args: argparse.Namespace) -> None:
             model.learn(args.steps, callback=callbacks, reset_num_timesteps=False)
             rates[kind].append(args.steps / (time.perf_counter() - start))
     reference = statistics.median(rates["none"]) if "none" in rates else None
-    print(f"{base.name}: {args.steps} transitions after warm-up, 8 envs, batch 512, 1 torch thread, "
-          f"median of {args.repeats}")
+    print(
+        f"{base.name}: {args.steps} transitions after warm-up, 8 envs, batch 512, 1 torch thread, "
+        f"median of {args.repeats}"
+    )
     print("| belief | transitions/s | vs none |")
     print("| --- | ---: | ---: |")
     for kind, values in rates.items():
@@ -123,14 +125,20 @@ def _last_seen(decoder, history: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _mean(model, history: np.ndarray) -> np.ndarray:
     with th.no_grad():
-        return np.concatenate([model.mixture(th.as_tensor(history[i:i + 2048])).mean().numpy()
-                               for i in range(0, len(history), 2048)])
+        return np.concatenate(
+            [model.mixture(th.as_tensor(history[i : i + 2048])).mean().numpy() for i in range(0, len(history), 2048)]
+        )
 
 
 def _nll(model, history: np.ndarray, target: np.ndarray) -> float:
     with th.no_grad():
-        total = sum(-model.mixture(th.as_tensor(history[i:i + 2048])).log_prob(th.as_tensor(target[i:i + 2048])).sum().item()
-                    for i in range(0, len(history), 2048))
+        total = sum(
+            -model.mixture(th.as_tensor(history[i : i + 2048]))
+            .log_prob(th.as_tensor(target[i : i + 2048]))
+            .sum()
+            .item()
+            for i in range(0, len(history), 2048)
+        )
     return total / len(history)
 
 
@@ -174,23 +182,37 @@ def quality(args: argparse.Namespace) -> None:
     settings = scenario.training.belief_settings
     t = scenario.training
     samples = -(-t.history_length // t.history_stride)
-    kwargs = {"window": (samples, test_x.shape[1] // samples), "scenario": scenario.model_dump(mode="json"),
-              "role": "pursuer"}
+    kwargs = {
+        "window": (samples, test_x.shape[1] // samples),
+        "scenario": scenario.model_dump(mode="json"),
+        "role": "pursuer",
+    }
     decoder = BeliefModel("ukf", **kwargs).decoder
     last, sighted = _last_seen(decoder, test_x)
     means: dict[str, np.ndarray] = {"last seen": last, "centre": np.zeros_like(last)}
     for kind in args.kinds:
         model = BeliefModel(kind, **kwargs)
         if model.learned:
-            best, seconds = _fit(model, (train_x, train_y), (valid_x, valid_y), settings, args.updates, args.check_every)
+            best, seconds = _fit(
+                model, (train_x, train_y), (valid_x, valid_y), settings, args.updates, args.check_every
+            )
             print(f"{kind}: {args.updates} updates in {seconds:.0f} s; kept update {best} (best validation NLL)")
         means[kind] = _mean(model, test_x)
-    fitted = (f"{len(train_x)} training windows ({args.games} games per evader), up to {args.updates} updates "
-              f"of batch {settings.batch_size}; " if learned else "")
-    print(f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {fitted}{int(test_unseen.sum())} held-out "
-          f"unseen moments ({args.test_games} other games per evader)")
-    groups = {"all unseen": test_unseen, "a sighting in the window": test_unseen & sighted,
-              "none in the window": test_unseen & ~sighted}
+    fitted = (
+        f"{len(train_x)} training windows ({args.games} games per evader), up to {args.updates} updates "
+        f"of batch {settings.batch_size}; "
+        if learned
+        else ""
+    )
+    print(
+        f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {fitted}{int(test_unseen.sum())} held-out "
+        f"unseen moments ({args.test_games} other games per evader)"
+    )
+    groups = {
+        "all unseen": test_unseen,
+        "a sighting in the window": test_unseen & sighted,
+        "none in the window": test_unseen & ~sighted,
+    }
     print("| belief | " + " | ".join(f"{name} ({int(mask.sum())})" for name, mask in groups.items()) + " |")
     print("| --- |" + " ---: |" * len(groups))
     errors = {kind: np.linalg.norm((mean - test_y) * half, axis=1) for kind, mean in means.items()}
@@ -220,8 +242,9 @@ def _checkpoints_within(run: Path, minutes: float) -> list[tuple[Path, float]]:
     return [(found[taken], float(np.interp(taken, steps, used))) for taken in sorted(found)]
 
 
-def _capture_rates(scenario: Any, pursuers: list[str], evaders: list[str], episodes: int, seed: int, out: Path,
-                   workers: int = 1) -> dict[tuple[str, str], Any]:
+def _capture_rates(
+    scenario: Any, pursuers: list[str], evaders: list[str], episodes: int, seed: int, out: Path, workers: int = 1
+) -> dict[tuple[str, str], Any]:
     """Every pursuer against every evader (checkpoint paths or policy names): ``PairingResult`` keyed by
     ``(_spec(pursuer), _spec(evader))``, from a ``pecli tournament`` whose pairings are cached in ``out``."""
     from pecli.tournament import find_players, run_tournament
@@ -245,8 +268,14 @@ def _spec(policy: str | Path) -> str:
     return str(Path(policy).resolve()) if str(policy).endswith(".zip") else str(policy)
 
 
-def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep: int, episodes: int, workers: int,
-                 ) -> list[tuple[Path, float]]:
+def _best_ranked(
+    run: Path,
+    found: list[tuple[Path, float]],
+    scenario: Any,
+    keep: int,
+    episodes: int,
+    workers: int,
+) -> list[tuple[Path, float]]:
     """The ``keep`` checkpoints of ``found`` that capture most against greedy on ranking episodes (seed 1).
 
     The paper's selection (§V-B), against the run's own opponent. The ranking episodes are not
@@ -254,8 +283,12 @@ def _best_ranked(run: Path, found: list[tuple[Path, float]], scenario: Any, keep
     cached in ``run/ranking``, so a second call only plays new checkpoints.
     """
     print(f"ranking {len(found)} checkpoints of {run.name}", file=sys.stderr, flush=True)
-    rates = _capture_rates(scenario, [str(path) for path, _ in found], ["greedy"], episodes, 1, run / "ranking", workers)
-    ranked = sorted(found, key=lambda c: (-rates[(_spec(c[0]), "greedy")].capture_rate, -c[1]))  # ties: the later checkpoint
+    rates = _capture_rates(
+        scenario, [str(path) for path, _ in found], ["greedy"], episodes, 1, run / "ranking", workers
+    )
+    ranked = sorted(
+        found, key=lambda c: (-rates[(_spec(c[0]), "greedy")].capture_rate, -c[1])
+    )  # ties: the later checkpoint
     return sorted(ranked[:keep], key=lambda c: c[1])
 
 
@@ -282,8 +315,9 @@ def _captures(checkpoint: Path, scenario: Any, shuffled_too: bool) -> list[int]:
             pursuer = resolve_policy(str(checkpoint), "pursuer", scenario)
             if shuffled:
                 _shuffle_belief(pursuer)
-            result, _ = play_match(scenario, pursuer, resolve_policy(evader, "evader", scenario),
-                                   episodes=TEST_EPISODES, seed=0)
+            result, _ = play_match(
+                scenario, pursuer, resolve_policy(evader, "evader", scenario), episodes=TEST_EPISODES, seed=0
+            )
             counts.append(int(result.captured.sum()))
     return counts
 
@@ -294,10 +328,15 @@ def capture(args: argparse.Namespace) -> None:
 
     scenario = load_scenario(args.config)
     curves = ROOT / "runs" / "bench_train"
-    chosen_by = (f"the best {args.keep} by capture vs greedy ({args.rank_episodes} ranking episodes, seed 1), pooled"
-                 if args.keep else "the newest")
-    print(f"checkpoints within {args.minutes:g} CPU-minutes of training: {chosen_by}; "
-          f"{TEST_EPISODES} test episodes each, seed 0")
+    chosen_by = (
+        f"the best {args.keep} by capture vs greedy ({args.rank_episodes} ranking episodes, seed 1), pooled"
+        if args.keep
+        else "the newest"
+    )
+    print(
+        f"checkpoints within {args.minutes:g} CPU-minutes of training: {chosen_by}; "
+        f"{TEST_EPISODES} test episodes each, seed 0"
+    )
     columns = " vs greedy, shuffled | vs rash, shuffled |" if args.shuffled else ""
     print("| belief | seed | checkpoint (~CPU min) | vs greedy | vs rash |" + columns)
     print("| --- | ---: | --- | ---: | ---: |" + " ---: | ---: |" * bool(args.shuffled))
@@ -308,7 +347,11 @@ def capture(args: argparse.Namespace) -> None:
             found = _checkpoints_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else []
             if not found:
                 continue
-            chosen = _best_ranked(run, found, scenario, args.keep, args.rank_episodes, args.workers) if args.keep else found[-1:]
+            chosen = (
+                _best_ranked(run, found, scenario, args.keep, args.rank_episodes, args.workers)
+                if args.keep
+                else found[-1:]
+            )
             shuffled_too = args.shuffled and kind != "none"
             counts = np.sum([_captures(path, scenario, shuffled_too) for path, _ in chosen], axis=0)
             episodes = TEST_EPISODES * len(chosen)
@@ -343,32 +386,46 @@ def selfplay(args: argparse.Namespace) -> None:
                 runs.setdefault(kind, {})[seed] = run
     if not runs:
         raise SystemExit(f"no self-play run in {args.zoo} has reached round {args.round}")
-    evaders = {f"{kind}-sp": [str(run / "evader" / checkpoint) for run in found.values()] for kind, found in runs.items()}
+    evaders = {
+        f"{kind}-sp": [str(run / "evader" / checkpoint) for run in found.values()] for kind, found in runs.items()
+    }
     evaders |= {name: [name] for name in ("greedy", "random-walk")}
-    print(f"round {args.round} pursuers of self-play ({args.opponents}) against the round-{args.round} evaders of "
-          f"every run and two heuristics; {TEST_EPISODES} episodes per pairing, seed 0")
+    print(
+        f"round {args.round} pursuers of self-play ({args.opponents}) against the round-{args.round} evaders of "
+        f"every run and two heuristics; {TEST_EPISODES} episodes per pairing, seed 0"
+    )
     print("| pursuer | seed | " + " | ".join(f"vs {name}" for name in evaders) + " |")
     print("| --- | ---: |" + " ---: |" * len(evaders))
     pursuers = [str(run / "pursuer" / checkpoint) for found in runs.values() for run in found.values()]
-    results = _capture_rates(scenario, pursuers, sum(evaders.values(), []), TEST_EPISODES, 0,
-                             args.zoo / "belief-cross", args.workers)
+    results = _capture_rates(
+        scenario, pursuers, sum(evaders.values(), []), TEST_EPISODES, 0, args.zoo / "belief-cross", args.workers
+    )
     captures: dict[str, list[list[tuple[int, int]]]] = {}  # kind → per seed, per evader group: (captures, episodes)
     for kind, found in runs.items():
         for seed, run in found.items():
             pursuer = _spec(run / "pursuer" / checkpoint)
-            row = [(sum(results[(pursuer, _spec(e))].captures for e in group),
-                    sum(results[(pursuer, _spec(e))].episodes for e in group)) for group in evaders.values()]
+            row = [
+                (
+                    sum(results[(pursuer, _spec(e))].captures for e in group),
+                    sum(results[(pursuer, _spec(e))].episodes for e in group),
+                )
+                for group in evaders.values()
+            ]
             captures.setdefault(kind, []).append(row)
             print(f"| {kind}-sp | {seed} | " + " | ".join(f"{c / n:.3f}" for c, n in row) + " |")
     for kind, rows in captures.items():
         medians = [statistics.median(c / n for c, n in column) for column in zip(*rows)]
-        print(f"median {kind}-sp ({len(rows)} seeds): " + ", ".join(
-            f"vs {name} {m:.3f}" for name, m in zip(evaders, medians)))
+        print(
+            f"median {kind}-sp ({len(rows)} seeds): "
+            + ", ".join(f"vs {name} {m:.3f}" for name, m in zip(evaders, medians))
+        )
     for kind in (k for k in captures if k != "none" and "none" in captures):
         for name, ours, theirs in zip(evaders, zip(*captures[kind]), zip(*captures["none"])):
             ours, theirs = (tuple(map(sum, zip(*column))) for column in (ours, theirs))  # pooled over seeds
-            print(f"pooled vs {name}: {kind}-sp {_ratio(*ours)}, none-sp {_ratio(*theirs)}, "
-                  f"p = {two_proportion_z_test(*ours, *theirs):.2g}")
+            print(
+                f"pooled vs {name}: {kind}-sp {_ratio(*ours)}, none-sp {_ratio(*theirs)}, "
+                f"p = {two_proportion_z_test(*ours, *theirs):.2g}"
+            )
 
 
 def _ratio(successes: int, trials: int) -> str:
@@ -389,17 +446,29 @@ def main() -> None:
     q.add_argument("--test-games", type=int, default=300, help="held-out games per evader")
     q.add_argument("--updates", type=int, default=6000)
     q.add_argument("--check-every", type=int, default=250, help="updates between validation checks")
-    q.add_argument("--kinds", nargs="+", default=["bimdn", "image", "ukf"], choices=["bimdn", "image", "ukf"],
-                   help="the beliefs to fit and score ('last seen' and the centre are always scored)")
+    q.add_argument(
+        "--kinds",
+        nargs="+",
+        default=["bimdn", "image", "ukf"],
+        choices=["bimdn", "image", "ukf"],
+        help="the beliefs to fit and score ('last seen' and the centre are always scored)",
+    )
     c = sub.add_parser("capture")
     c.add_argument("--config", default="paper")
     c.add_argument("--kinds", nargs="+", default=["none", "bimdn", "bimdn-mixed"])
     c.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     c.add_argument("--minutes", type=float, default=10.0)
-    c.add_argument("--shuffled", action="store_true",
-                   help="also play each belief checkpoint with its features permuted across games")
-    c.add_argument("--keep", type=int, default=0,
-                   help="the paper's selection: rank every checkpoint within the budget, test the best KEEP")
+    c.add_argument(
+        "--shuffled",
+        action="store_true",
+        help="also play each belief checkpoint with its features permuted across games",
+    )
+    c.add_argument(
+        "--keep",
+        type=int,
+        default=0,
+        help="the paper's selection: rank every checkpoint within the budget, test the best KEEP",
+    )
     c.add_argument("--rank-episodes", type=int, default=200, help="episodes per checkpoint in the ranking")
     c.add_argument("--workers", type=int, default=1, help="processes for the ranking")
     d = sub.add_parser("selfplay")

@@ -75,30 +75,64 @@ def bench_save(beliefs: list[str], repeats: int) -> None:
         interval_rows = 50_000 // t.n_envs
         with tempfile.TemporaryDirectory() as tmp:
             folder = Path(tmp)
-            rows = [("SB3 pickled replay buffer (before)", lambda: model.save_replay_buffer(folder / "buffer.pkl"),
-                     folder / "buffer.pkl")]
-            rows.append(("whole replay buffer as arrays", lambda: write_chunk(
-                folder / "whole", "replay", replay_arrays(buffer), Ring(buffer.buffer_size), buffer.buffer_size),
-                folder / "whole"))
-            rows.append(("one interval of rows (50 000 transitions)", lambda: write_chunk(
-                folder / "interval", "replay", replay_arrays(buffer), Ring(buffer.buffer_size, 0), interval_rows),
-                folder / "interval"))
+            rows = [
+                (
+                    "SB3 pickled replay buffer (before)",
+                    lambda: model.save_replay_buffer(folder / "buffer.pkl"),
+                    folder / "buffer.pkl",
+                )
+            ]
+            rows.append(
+                (
+                    "whole replay buffer as arrays",
+                    lambda: write_chunk(
+                        folder / "whole", "replay", replay_arrays(buffer), Ring(buffer.buffer_size), buffer.buffer_size
+                    ),
+                    folder / "whole",
+                )
+            )
+            rows.append(
+                (
+                    "one interval of rows (50 000 transitions)",
+                    lambda: write_chunk(
+                        folder / "interval", "replay", replay_arrays(buffer), Ring(buffer.buffer_size, 0), interval_rows
+                    ),
+                    folder / "interval",
+                )
+            )
             if fit is not None:
-                rows.append(("whole belief buffer as arrays", lambda: write_chunk(
-                    folder / "belief", "belief", fit.buffer.arrays(), Ring(fit.buffer.capacity), fit.buffer.capacity),
-                    folder / "belief"))
-            rows.append(("model zip (weights, optimisers)", lambda: model.save(folder / "model.zip"), folder / "model.zip"))
+                rows.append(
+                    (
+                        "whole belief buffer as arrays",
+                        lambda: write_chunk(
+                            folder / "belief",
+                            "belief",
+                            fit.buffer.arrays(),
+                            Ring(fit.buffer.capacity),
+                            fit.buffer.capacity,
+                        ),
+                        folder / "belief",
+                    )
+                )
+            rows.append(
+                ("model zip (weights, optimisers)", lambda: model.save(folder / "model.zip"), folder / "model.zip")
+            )
             for directory in ("whole", "interval", "belief"):
                 (folder / directory).mkdir()
             for what, action, path in rows:
                 print(f"| {belief} | {what} | {median_time(action, repeats):.3f} | {size_mb(path):.1f} |")
             state = DurableState(folder / "state")
-            print(f"| {belief} | durable save, first (whole buffers) | "
-                  f"{median_time(lambda: (setattr(state, 'record', None), state.save(model, fit, 0, 0.0)), repeats):.3f} | "
-                  f"{size_mb(folder / 'state'):.1f} |")
+            print(
+                f"| {belief} | durable save, first (whole buffers) | "
+                f"{median_time(lambda: (setattr(state, 'record', None), state.save(model, fit, 0, 0.0)), repeats):.3f}"
+                " | "
+                f"{size_mb(folder / 'state'):.1f} |"
+            )
             record = state.read()
-            print(f"| {belief} | restore of that state | "
-                  f"{median_time(lambda: state.restore(record, model, fit), repeats):.3f} | |")
+            print(
+                f"| {belief} | restore of that state | "
+                f"{median_time(lambda: state.restore(record, model, fit), repeats):.3f} | |"
+            )
 
 
 def process_cpu(pid: int) -> float:
@@ -141,8 +175,9 @@ def bench_kills(kills: int, seed: int, zoo: Path) -> None:
             process.wait()
             lost.append(at_kill - last_commit_cpu)
             record = json.loads(state_file.read_text()) if state_file.is_file() else None
-            rows.append((k + 1, f"{moment:.1f}", f"{at_kill:.1f}", f"{lost[-1]:.1f}",
-                         record["steps"] if record else "-"))
+            rows.append(
+                (k + 1, f"{moment:.1f}", f"{at_kill:.1f}", f"{lost[-1]:.1f}", record["steps"] if record else "-")
+            )
         else:
             output = process.stdout.read()
             if process.returncode != 0:
@@ -150,8 +185,10 @@ def bench_kills(kills: int, seed: int, zoo: Path) -> None:
                 print(f"resume failed: {output.strip().splitlines()[-1]}")
             break
         command = [*base, "--resume"]
-    print("| kill | chosen moment, CPU s | CPU of the killed process, s | CPU lost since its newest commit, s | "
-          "committed step |")
+    print(
+        "| kill | chosen moment, CPU s | CPU of the killed process, s | CPU lost since its newest commit, s | "
+        "committed step |"
+    )
     print("| ---: | ---: | ---: | ---: | ---: |")
     for row in rows:
         print("| " + " | ".join(str(x) for x in row) + " |")
@@ -161,8 +198,10 @@ def bench_kills(kills: int, seed: int, zoo: Path) -> None:
     if lost:
         print(f"CPU lost per kill: median {statistics.median(lost):.1f} s, max {max(lost):.1f} s")
     if intervals:
-        print(f"CPU between two commits (one interval): median {statistics.median(intervals):.1f} s, "
-              f"max {max(intervals):.1f} s")
+        print(
+            f"CPU between two commits (one interval): median {statistics.median(intervals):.1f} s, "
+            f"max {max(intervals):.1f} s"
+        )
 
 
 def main() -> None:

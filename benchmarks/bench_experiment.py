@@ -35,12 +35,22 @@ from pecli.io import atomic_write_json  # noqa: E402
 
 
 def experiment(runs: int, rounds: int, steps_per_round: int):
-    return experiment_from_dict({
-        "name": "bench", "scenario": "quick",
-        "training": {"learning_starts": 500, "checkpoint_every": 20},
-        "runs": {"kinds": ["none"], "seeds": list(range(runs)), "rounds": rounds, "steps_per_round": steps_per_round},
-        "ranking": {"sample": 4, "episodes": 50}, "tournament": {"episodes": 100, "baselines": True},
-    }, "bench")
+    return experiment_from_dict(
+        {
+            "name": "bench",
+            "scenario": "quick",
+            "training": {"learning_starts": 500, "checkpoint_every": 20},
+            "runs": {
+                "kinds": ["none"],
+                "seeds": list(range(runs)),
+                "rounds": rounds,
+                "steps_per_round": steps_per_round,
+            },
+            "ranking": {"sample": 4, "episodes": 50},
+            "tournament": {"episodes": 100, "baselines": True},
+        },
+        "bench",
+    )
 
 
 def timed_experiment(loaded, out: Path, cpus: int) -> dict[str, float]:
@@ -101,8 +111,11 @@ def main() -> None:
     empty = empty_task_seconds()
 
     result = {
-        "runs": args.runs, "rounds": args.rounds, "steps_per_round": args.steps_per_round,
-        "loop_training_s": round(loop, 2), "ray_1": {k: round(v, 2) for k, v in ray1.items()},
+        "runs": args.runs,
+        "rounds": args.rounds,
+        "steps_per_round": args.steps_per_round,
+        "loop_training_s": round(loop, 2),
+        "ray_1": {k: round(v, 2) for k, v in ray1.items()},
         "ray_2": {k: round(v, 2) for k, v in ray2.items()},
         "speedup_2_over_1": round(ray1["experiment"] / ray2["experiment"], 3),
         "speedup_2_over_1_training": round(ray1["training"] / ray2["training"], 3),
@@ -114,13 +127,19 @@ def main() -> None:
     print(f"{args.runs} runs x {args.rounds} rounds x {args.steps_per_round} transitions per side (quick, none)")
     print(f"{'':>12} {'ray start':>10} {'training':>9} {'ranking':>8} {'tournament':>11} {'experiment':>11}")
     for name, t in (("ray, 1 cpu", ray1), ("ray, 2 cpus", ray2)):
-        print(f"{name:>12} {t['ray_start']:>10.1f} {t['training']:>9.1f} {t.get('ranking', 0):>8.1f} "
-              f"{t.get('tournament', 0):>11.1f} {t['experiment']:>11.1f}")
+        print(
+            f"{name:>12} {t['ray_start']:>10.1f} {t['training']:>9.1f} {t.get('ranking', 0):>8.1f} "
+            f"{t.get('tournament', 0):>11.1f} {t['experiment']:>11.1f}"
+        )
     print(f"{'plain loop':>12} {'':>10} {loop:>9.1f}")
-    print(f"speed-up with 2 workers: {result['speedup_2_over_1']:.2f}x whole experiment, "
-          f"{result['speedup_2_over_1_training']:.2f}x training (target >= 1.8)")
-    print(f"Ray's overhead on training, 1 worker vs the loop: {100 * result['ray_overhead_training']:+.1f} % "
-          f"(target <= 5 %); an empty task's round trip {result['empty_task_ms']:.2f} ms")
+    print(
+        f"speed-up with 2 workers: {result['speedup_2_over_1']:.2f}x whole experiment, "
+        f"{result['speedup_2_over_1_training']:.2f}x training (target >= 1.8)"
+    )
+    print(
+        f"Ray's overhead on training, 1 worker vs the loop: {100 * result['ray_overhead_training']:+.1f} % "
+        f"(target <= 5 %); an empty task's round trip {result['empty_task_ms']:.2f} ms"
+    )
     print(f"load average before/after: {result['load_average_before_after']}")
     print(json.dumps(result))
 

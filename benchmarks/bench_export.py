@@ -47,7 +47,9 @@ def build(kind: str, config: str, zoo: Path) -> tuple[Path, Path]:
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=zoo, name=kind)
     env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
     model = make_model(job, env, tensorboard=None)
-    checkpoint = Run.create(zoo, kind, scenario, {"command": "bench_export"}).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
+    checkpoint = Run.create(zoo, kind, scenario, {"command": "bench_export"}).save(
+        model, "pursuer", "final", checkpoint_meta(job, model, 0)
+    )
     return checkpoint, export_checkpoint(checkpoint, episodes=2).model
 
 
@@ -108,8 +110,11 @@ def measure(kind: str, config: str, decisions: int, rounds: int, zoo: Path) -> d
         samples["runtime"] += timed(runtime, ticks, skip)
         stack, window = controller.stack[None], controller.window()[None]
         graph = controller.model
-        draws = ((np.full((1, graph.draws), 0.5, np.float32), np.zeros((1, graph.draws, 2), np.float32))
-                 if graph.draws else (None, None))
+        draws = (
+            (np.full((1, graph.draws), 0.5, np.float32), np.zeros((1, graph.draws, 2), np.float32))
+            if graph.draws
+            else (None, None)
+        )
         samples["onnx graph"] += timed(lambda t: graph.run(stack, window, *draws), decisions, 1)
         learned.reset(1, seed=0)
         samples["torch"] += timed(torch_policy, ticks, skip)
@@ -141,8 +146,10 @@ def main() -> None:
     th.set_num_threads(1)
     import onnxruntime
 
-    print(f"{args.config}, batch 1, one thread each (torch {th.__version__}, onnxruntime {onnxruntime.__version__}), "
-          f"{args.decisions} decisions x {args.rounds} rounds per path")
+    print(
+        f"{args.config}, batch 1, one thread each (torch {th.__version__}, onnxruntime {onnxruntime.__version__}), "
+        f"{args.decisions} decisions x {args.rounds} rounds per path"
+    )
     print("| belief | path | p50 ms | p99 ms | p50 vs torch | .onnx | checkpoint |")
     print("| --- | --- | ---: | ---: | ---: | ---: | ---: |")
     with tempfile.TemporaryDirectory() as tmp:
@@ -153,8 +160,10 @@ def main() -> None:
             p99 = {path: 1e3 * float(np.percentile(values, 99)) for path, values in samples.items()}
             sizes = f"{result['onnx_bytes'] / 1024:.0f} KiB | {result['checkpoint_bytes'] / 1024:.0f} KiB"
             for i, path in enumerate(samples):
-                print(f"| {kind} | {path} | {p50[path]:.3f} | {p99[path]:.3f} | {p50['torch'] / p50[path]:.1f}x | "
-                      f"{sizes if i == 0 else ' | '} |")
+                print(
+                    f"| {kind} | {path} | {p50[path]:.3f} | {p99[path]:.3f} | {p50['torch'] / p50[path]:.1f}x | "
+                    f"{sizes if i == 0 else ' | '} |"
+                )
 
 
 if __name__ == "__main__":

@@ -70,8 +70,12 @@ from pecli.scenario import Scenario, load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EPISODES = 500
-PAPER_TABLE_II = {("optimal control", "optimal control"): 0.47, ("optimal control", "ours"): 0.50,
-                  ("ours", "optimal control"): 0.83, ("ours", "ours"): 0.80}
+PAPER_TABLE_II = {
+    ("optimal control", "optimal control"): 0.47,
+    ("optimal control", "ours"): 0.50,
+    ("ours", "optimal control"): 0.83,
+    ("ours", "ours"): 0.80,
+}
 
 
 # ---------------------------------------------------------------------- solve
@@ -108,9 +112,17 @@ def one(config: str, model: str, sizes: tuple[int, int], steps: int | None, back
         tracemalloc.stop()
     else:
         peak = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024  # KiB -> MiB
-    result = {"backend": backend, "model": model, "grid": problem.grid.describe(), "nodes": problem.grid.size,
-              "steps": problem.steps, "seconds": seconds, "cpu": cpu_seconds, "peak_mb": peak,
-              "capture_share": float(np.mean(values <= 0))}
+    result = {
+        "backend": backend,
+        "model": model,
+        "grid": problem.grid.describe(),
+        "nodes": problem.grid.size,
+        "steps": problem.steps,
+        "seconds": seconds,
+        "cpu": cpu_seconds,
+        "peak_mb": peak,
+        "capture_share": float(np.mean(values <= 0)),
+    }
     if model == "rel4d":
         result |= accuracy(problem, values)
     return result
@@ -153,22 +165,34 @@ def solve_table(args: argparse.Namespace) -> None:
         print(json.dumps(results, indent=2))
         return
     print(f"scenario {args.config}, {platform.machine()}, numpy {np.__version__}, one thread per solve")
-    print("| backend | model | grid | nodes | steps | solve s | CPU s | peak MB | capture share | runs "
-          "| sign vs discrete | error vs discrete (m) | sign vs continuous | error vs continuous (m) |")
+    print(
+        "| backend | model | grid | nodes | steps | solve s | CPU s | peak MB | capture share | runs "
+        "| sign vs discrete | error vs discrete (m) | sign vs continuous | error vs continuous (m) |"
+    )
     print("| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for r in results:
-        exact = [f"{r[k]:.4f}" if k.startswith("sign") else f"{r[k]:.3f}" for k in
-                 ("sign_discrete", "error_discrete", "sign_continuous", "error_continuous")] if "sign_discrete" in r \
+        exact = (
+            [
+                f"{r[k]:.4f}" if k.startswith("sign") else f"{r[k]:.3f}"
+                for k in ("sign_discrete", "error_discrete", "sign_continuous", "error_continuous")
+            ]
+            if "sign_discrete" in r
             else ["-"] * 4
-        print(f"| {r['backend']} | {r['model']} | {r['grid']} | {r['nodes']:,} | {r['steps']} | {r['seconds']:.2f} "
-              f"| {r['cpu']:.2f} | {r['peak_mb']:.0f} | {r['capture_share']:.3f} | {r['runs']} | "
-              + " | ".join(exact) + " |")
+        )
+        print(
+            f"| {r['backend']} | {r['model']} | {r['grid']} | {r['nodes']:,} | {r['steps']} | {r['seconds']:.2f} "
+            f"| {r['cpu']:.2f} | {r['peak_mb']:.0f} | {r['capture_share']:.3f} | {r['runs']} | "
+            + " | ".join(exact)
+            + " |"
+        )
     if results[-1]["backend"] == "hj-reachability":
         numpy_run, jax_run = results[-2:]
-        print(f"\non {numpy_run['grid']}: numpy {jax_run['seconds'] / numpy_run['seconds']:.0f}x faster than "
-              f"hj-reachability (CPU {jax_run['cpu'] / numpy_run['cpu']:.0f}x); mean error "
-              f"{numpy_run['error_discrete']:.3f} m (vs the discrete closed form) against "
-              f"{jax_run['error_continuous']:.3f} m (hj-reachability vs the continuous one)")
+        print(
+            f"\non {numpy_run['grid']}: numpy {jax_run['seconds'] / numpy_run['seconds']:.0f}x faster than "
+            f"hj-reachability (CPU {jax_run['cpu'] / numpy_run['cpu']:.0f}x); mean error "
+            f"{numpy_run['error_discrete']:.3f} m (vs the discrete closed form) against "
+            f"{jax_run['error_continuous']:.3f} m (hj-reachability vs the continuous one)"
+        )
 
 
 # ---------------------------------------------------------------------- players
@@ -219,7 +243,8 @@ class GradientRule(HJPolicy):
             behind[:, k] = np.maximum(points[:, k] - axis.spacing, axis.low)
             values = self.solution.values
             out[:, j] = (self.grid.interpolate(values, ahead) - self.grid.interpolate(values, behind)) / (
-                ahead[:, k] - behind[:, k])
+                ahead[:, k] - behind[:, k]
+            )
         return out
 
 
@@ -244,14 +269,18 @@ class KeepsEstimates(HJPolicy):
 
 
 class Chase(GradientRule):
-    """"chase": the old players' fallback everywhere (needs a rel4d or rel6d solution)."""
+    """ "chase": the old players' fallback everywhere (needs a rel4d or rel6d solution)."""
 
     name = "chase"
     chase_only = True
 
 
-def solution_for(scenario: Scenario, model: str, sizes: tuple[int, int] | None = None, steps: int | None = None,
-                 ) -> Solution:
+def solution_for(
+    scenario: Scenario,
+    model: str,
+    sizes: tuple[int, int] | None = None,
+    steps: int | None = None,
+) -> Solution:
     """The cached solution of that problem (solved and cached if missing)."""
     problem = Problem.for_scenario(scenario, model, sizes, steps=steps)  # type: ignore[arg-type]
     started = time.process_time()
@@ -312,11 +341,17 @@ def causes(args: argparse.Namespace) -> None:
     pairings = [
         ("hj vs hj", HJPolicy(base, "pursuer", arena), HJPolicy(base, "evader", arena)),
         ("hj vs greedy", HJPolicy(base, "pursuer", arena), greedy),
-        ("hj vs an hj evader that rates its estimate", HJPolicy(base, "pursuer", arena),
-         RatesEstimates(base, "evader", arena)),
+        (
+            "hj vs an hj evader that rates its estimate",
+            HJPolicy(base, "pursuer", arena),
+            RatesEstimates(base, "evader", arena),
+        ),
         ("an hj pursuer that rates its estimate vs greedy", RatesEstimates(base, "pursuer", arena), greedy),
-        ("an hj pursuer that keeps its estimate in sight vs hj", KeepsEstimates(base, "pursuer", arena),
-         HJPolicy(base, "evader", arena)),
+        (
+            "an hj pursuer that keeps its estimate in sight vs hj",
+            KeepsEstimates(base, "pursuer", arena),
+            HJPolicy(base, "evader", arena),
+        ),
         ("an hj pursuer that keeps its estimate in sight vs greedy", KeepsEstimates(base, "pursuer", arena), greedy),
     ]
     print(f"\npoint_mass.yaml (sensor ranges 3.75 m), abs8d 15,5, {args.episodes} games per cell, seed 0\n")
@@ -357,15 +392,21 @@ def ratings(args: argparse.Namespace) -> None:
     base = load_scenario("point_mass")
     full = seeing(base)
     arena = solution_for(full, "abs8d")
-    pursuers = [("chase", "chase"), ("interceptor", "interceptor"), ("hj rel4d", "hj:model=rel4d"),
-                ("pure-pursuit", "pure-pursuit")]
+    pursuers = [
+        ("chase", "chase"),
+        ("interceptor", "interceptor"),
+        ("hj rel4d", "hj:model=rel4d"),
+        ("pure-pursuit", "pure-pursuit"),
+    ]
     pursuers += [(f"learned full ({Path(p).parent.parent.name})", p) for p in args.full_pursuer]
     print(f"full observation: capture rate of the hj evader, {args.episodes} games per cell, seed 0\n")
     print("| evader's rating | " + " | ".join(label for label, _ in pursuers) + " |")
     print("| --- |" + " ---: |" * len(pursuers))
     for name, rule in RATINGS.items():
-        cells = [rate(full, make_player(spec, "pursuer", full, base, 0), Rating(full, arena, rule), args.episodes)[0]
-                 for _, spec in pursuers]
+        cells = [
+            rate(full, make_player(spec, "pursuer", full, base, 0), Rating(full, arena, rule), args.episodes)[0]
+            for _, spec in pursuers
+        ]
         print(f"| {name} | " + " | ".join(f"{c:.3f}" for c in cells) + " |", flush=True)
 
 
@@ -373,11 +414,23 @@ def ratings(args: argparse.Namespace) -> None:
 def players(args: argparse.Namespace, base: Scenario) -> dict[str, list[tuple[str, str]]]:
     """``(label, spec)`` per role; "chase" stands for the old fallback rule on the default rel4d solution."""
     out = {
-        "pursuer": [("hj", "hj"), ("hj rel4d", "hj:model=rel4d"), ("chase", "chase"),
-                    ("pure-pursuit", "pure-pursuit"), ("random-walk", "random-walk"), ("interceptor", "interceptor")],
-        "evader": [("hj", "hj"), ("hj rel4d", "hj:model=rel4d"), ("chase (flee)", "chase"),
-                   ("greedy", "greedy"), ("random-walk", "random-walk"), ("rash", "rash"),
-                   ("wall-runner", "wall-runner")],  # circler and blindside flee like greedy from a point mass
+        "pursuer": [
+            ("hj", "hj"),
+            ("hj rel4d", "hj:model=rel4d"),
+            ("chase", "chase"),
+            ("pure-pursuit", "pure-pursuit"),
+            ("random-walk", "random-walk"),
+            ("interceptor", "interceptor"),
+        ],
+        "evader": [
+            ("hj", "hj"),
+            ("hj rel4d", "hj:model=rel4d"),
+            ("chase (flee)", "chase"),
+            ("greedy", "greedy"),
+            ("random-walk", "random-walk"),
+            ("rash", "rash"),
+            ("wall-runner", "wall-runner"),
+        ],  # circler and blindside flee like greedy from a point mass
     }
     for role, path in (("pursuer", args.pursuer), ("evader", args.evader)):
         if path:
@@ -387,8 +440,10 @@ def players(args: argparse.Namespace, base: Scenario) -> dict[str, list[tuple[st
 
 def full_players(args: argparse.Namespace) -> dict[str, list[tuple[str, str]]]:
     """The learned players trained under full observation (``point_mass_full.yaml``), per role."""
-    return {role: [(f"learned full ({Path(path).parent.parent.name})", str(path))] if path else []
-            for role, path in (("pursuer", args.full_pursuer), ("evader", args.full_evader))}
+    return {
+        role: [(f"learned full ({Path(path).parent.parent.name})", str(path))] if path else []
+        for role, path in (("pursuer", args.full_pursuer), ("evader", args.full_evader))
+    }
 
 
 def make_player(spec: str, role: str, scenario: Scenario, base: Scenario, seed: int):
@@ -423,8 +478,10 @@ def matrix(args: argparse.Namespace) -> None:
                 table[f"{p_label} | {e_label}"] = rate(scenario, pursuer, evader, args.episodes)
             print(f"done: {observation} {p_label}", file=sys.stderr)
         results[observation] = table
-        print(f"\n{observation} observation: capture rate (time-to-capture / T), {args.episodes} games per cell, "
-              "seed 0; pursuers in columns, evaders in rows\n")
+        print(
+            f"\n{observation} observation: capture rate (time-to-capture / T), {args.episodes} games per cell, "
+            "seed 0; pursuers in columns, evaders in rows\n"
+        )
         pursuers = [label for label, _ in roster["pursuer"]]
         print("| evader \\ pursuer | " + " | ".join(pursuers) + " |")
         print("| --- |" + " ---: |" * len(pursuers))
@@ -436,17 +493,21 @@ def matrix(args: argparse.Namespace) -> None:
         Path(args.json).write_text(json.dumps(results, indent=2))
 
 
-def print_targets(table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]],
-                  short: set[str]) -> None:
+def print_targets(
+    table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]], short: set[str]
+) -> None:
     """Issue 19's targets: the hj pursuer captures at least as often as the best heuristic pursuer against
     every evader, and the hj evader is caught at most as often as the best heuristic evader by every pursuer.
     An opponent in ``short`` (a checkpoint keeping its 3.75 m sensor under full observation) plays another
     game than the value's, and its row says so instead."""
+
     def heuristic(label: str) -> bool:
         return not label.startswith(("hj", "learned"))
 
     def verdict(met: bool, spec: str) -> str:
-        return ("yes" if met else "no") + (" (its 3.75 m sensor: not the full-information game)" if spec in short else "")
+        return ("yes" if met else "no") + (
+            " (its 3.75 m sensor: not the full-information game)" if spec in short else ""
+        )
 
     print("\n| opponent | hj | best heuristic | target met |\n| --- | ---: | --- | --- |")
     for e_label, e_spec in roster["evader"]:
@@ -466,27 +527,55 @@ def table2(args: argparse.Namespace) -> None:
     out = Path(args.out)
     commands = [
         [pecli, "hj", "solve", "-c", "point_mass"],
-        [pecli, "tournament", "-c", "point_mass", "--episodes", str(args.episodes), "--seeds", str(args.seeds),
-         "--workers", "1", "--resume", "--out", str(out), args.pursuer, args.evader,
-         f"hj:belief={args.pursuer}", f"hj:belief={args.evader}", "hj"],
+        [
+            pecli,
+            "tournament",
+            "-c",
+            "point_mass",
+            "--episodes",
+            str(args.episodes),
+            "--seeds",
+            str(args.seeds),
+            "--workers",
+            "1",
+            "--resume",
+            "--out",
+            str(out),
+            args.pursuer,
+            args.evader,
+            f"hj:belief={args.pursuer}",
+            f"hj:belief={args.evader}",
+            "hj",
+        ],
         [pecli, "hj", "table", str(out)],
     ]
     for command in commands:
-        print("$ " + " ".join(Path(command[0]).name if i == 0 else part for i, part in enumerate(command)),
-              file=sys.stderr)
+        print(
+            "$ " + " ".join(Path(command[0]).name if i == 0 else part for i, part in enumerate(command)),
+            file=sys.stderr,
+        )
         subprocess.run(command, check=True, stdout=None if command[1:3] == ["hj", "table"] else subprocess.DEVNULL)
     data = json.loads((out / "results.json").read_text())
     cells = {(p["pursuer"], p["evader"]): p for p in data["pairings"]}
-    names = {"optimal control": {"pursuer": _player_name(data, f"hj:belief={args.pursuer}", "pursuer"),
-                                 "evader": _player_name(data, f"hj:belief={args.evader}", "evader")},
-             "ours": {"pursuer": _player_name(data, args.pursuer, "pursuer"),
-                      "evader": _player_name(data, args.evader, "evader")}}
+    names = {
+        "optimal control": {
+            "pursuer": _player_name(data, f"hj:belief={args.pursuer}", "pursuer"),
+            "evader": _player_name(data, f"hj:belief={args.evader}", "evader"),
+        },
+        "ours": {
+            "pursuer": _player_name(data, args.pursuer, "pursuer"),
+            "evader": _player_name(data, args.evader, "evader"),
+        },
+    }
     print("\n| pursuer vs evader | pecli capture (time-to-capture, σ) | paper capture |")
     print("| --- | ---: | ---: |")
     for (pursuer, evader), paper in PAPER_TABLE_II.items():
         cell = cells.get((names[pursuer]["pursuer"], names[evader]["evader"]))
-        ours = f"{cell['capture_rate']:.3f} ({cell['time_to_capture_mean']:.2f}, {cell['time_to_capture_std']:.2f})" \
-            if cell else "-"
+        ours = (
+            f"{cell['capture_rate']:.3f} ({cell['time_to_capture_mean']:.2f}, {cell['time_to_capture_std']:.2f})"
+            if cell
+            else "-"
+        )
         print(f"| {pursuer} vs {evader} | {ours} | {paper:.2f} |")
 
 
@@ -518,8 +607,11 @@ def main() -> None:
     m = sub.add_parser("matrix", help="capture matrices under full and partial observation")
     m.add_argument("--pursuer", help="a learned pursuer checkpoint (.zip) to add")
     m.add_argument("--evader", help="a learned evader checkpoint (.zip) to add")
-    m.add_argument("--full-pursuer", help="a learned pursuer trained under full observation "
-                   "(benchmarks/point_mass_full.yaml), for the full-observation matrix")
+    m.add_argument(
+        "--full-pursuer",
+        help="a learned pursuer trained under full observation "
+        "(benchmarks/point_mass_full.yaml), for the full-observation matrix",
+    )
     m.add_argument("--full-evader", help="a learned evader trained under full observation, likewise")
     m.add_argument("--episodes", type=int, default=EPISODES)
     m.add_argument("--observation", nargs="+", choices=("full", "partial"), default=["full", "partial"])

@@ -92,8 +92,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="tuned")
     parser.add_argument("--belief", default="bimdn", help="the members' belief (fresh members)")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="a training setting of the fresh members, e.g. belief_settings.hidden=64")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a training setting of the fresh members, e.g. belief_settings.hidden=64",
+    )
     parser.add_argument("--checkpoints", default=None, help="a glob of trained checkpoints instead of fresh members")
     parser.add_argument("--role", default="evader", choices=["pursuer", "evader"])
     parser.add_argument("--members", nargs="+", type=int, default=[1, 2, 4, 8, 16])
@@ -108,7 +114,9 @@ def main() -> None:
             paths = sorted(glob.glob(args.checkpoints))
             if not paths:
                 sys.exit(f"--checkpoints {args.checkpoints}: no checkpoint there")
-            pool = [resolve_policy(paths[i % len(paths)], args.role, scenario, seed=i) for i in range(max(args.members))]
+            pool = [
+                resolve_policy(paths[i % len(paths)], args.role, scenario, seed=i) for i in range(max(args.members))
+            ]
             what = f"{len(paths)} checkpoints of {args.checkpoints}"
         else:
             from pecli.rl.train import parse_overrides, with_overrides

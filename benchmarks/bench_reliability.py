@@ -35,9 +35,22 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-NEUTRAL = Path(tempfile.gettempdir())  # where the subprocesses run: `python -m` puts the working folder first on sys.path
-TINY = ["--set", "learning_starts=50", "--set", "n_envs=2", "--set", "net_arch=[16, 16]", "--set", "buffer_size=500",
-        "--set", "batch_size=16", "-q"]
+NEUTRAL = Path(
+    tempfile.gettempdir()
+)  # where the subprocesses run: `python -m` puts the working folder first on sys.path
+TINY = [
+    "--set",
+    "learning_starts=50",
+    "--set",
+    "n_envs=2",
+    "--set",
+    "net_arch=[16, 16]",
+    "--set",
+    "buffer_size=500",
+    "--set",
+    "batch_size=16",
+    "-q",
+]
 STALLING = ROOT / "tests" / "stalling.py"  # the policy whose pairing keeps a worker busy until killed
 
 
@@ -68,8 +81,15 @@ def environment(source: Path | None, extra: Path | None = None) -> dict[str, str
 def pecli(args: list[str], env: dict[str, str], timeout: float = 300) -> tuple[int, str]:
     """Run ``python -m pecli ARGS``; returns the exit code and stderr + stdout."""
     try:
-        done = subprocess.run([sys.executable, "-m", "pecli", *args], env=env, capture_output=True, text=True,
-                              timeout=timeout, cwd=NEUTRAL, preexec_fn=limit_memory)
+        done = subprocess.run(
+            [sys.executable, "-m", "pecli", *args],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            cwd=NEUTRAL,
+            preexec_fn=limit_memory,
+        )
     except subprocess.TimeoutExpired:
         return -1, "timed out"
     return done.returncode, done.stderr + done.stdout
@@ -136,22 +156,38 @@ def bad_inputs(work: Path, env: dict[str, str], base: Path) -> list[Outcome]:
     outcomes = []
     zoo = work / "zoo-inputs"
     for i, (name, path) in enumerate(config_cases(work)):
-        code, out = pecli(["train", "pursuer", "-c", str(path), "--zoo", str(zoo), "--name", f"c{i}", "--steps", "20",
-                           "-q"], env)
+        code, out = pecli(
+            ["train", "pursuer", "-c", str(path), "--zoo", str(zoo), "--name", f"c{i}", "--steps", "20", "-q"], env
+        )
         outcomes.append(judge("inputs", f"config {name}", code, out))
-    sets = ["learning_rate=.inf", "learning_rate=nan", "gamma=.nan", "n_envs=true", "curriculum.enabled=1",
-            "steps=1e400", "n_envs=100000000", "net_arch=[64,1e9]", "belief_settings.hidden=100000000"]
+    sets = [
+        "learning_rate=.inf",
+        "learning_rate=nan",
+        "gamma=.nan",
+        "n_envs=true",
+        "curriculum.enabled=1",
+        "steps=1e400",
+        "n_envs=100000000",
+        "net_arch=[64,1e9]",
+        "belief_settings.hidden=100000000",
+    ]
     for i, item in enumerate(sets):
         budget = [] if item.startswith("steps=") else ["--steps", "20"]  # --steps would override --set steps
-        code, out = pecli(["train", "pursuer", "-c", "quick", "--zoo", str(zoo), "--name", f"s{i}", *budget,
-                           "--set", item, "-q"], env)
+        code, out = pecli(
+            ["train", "pursuer", "-c", "quick", "--zoo", str(zoo), "--name", f"s{i}", *budget, "--set", item, "-q"], env
+        )
         outcomes.append(judge("inputs", f"--set {item}", code, out))
     for command in (["tournament", "--baselines", "--seeds", "1", "-w", "1", "--out", str(work / "huge")], ["play"]):
         code, out = pecli([*command, "-c", "quick", "--episodes", "10000000000"], env)
         outcomes.append(judge("inputs", f"{command[0]} --episodes 10^10", code, out))
     for name in ["../../escape", "/tmp/pecli-bench-escape", "a/b", ".", "..", ".hidden", "a b"]:
-        for command in (["train", "pursuer", "--steps", "20"], ["selfplay", "--rounds", "1", "--steps-per-round", "20"]):
-            code, out = pecli([*command, "-c", "quick", "--zoo", str(work / "deep" / "zoo"), "--name", name, *TINY], env)
+        for command in (
+            ["train", "pursuer", "--steps", "20"],
+            ["selfplay", "--rounds", "1", "--steps-per-round", "20"],
+        ):
+            code, out = pecli(
+                [*command, "-c", "quick", "--zoo", str(work / "deep" / "zoo"), "--name", name, *TINY], env
+            )
             outcomes.append(judge("inputs", f"{command[0]} --name {name!r}", code, out))
     shutil.rmtree("/tmp/pecli-bench-escape", ignore_errors=True)
     outcomes += export_and_zoo_inputs(work, env, base)
@@ -167,11 +203,13 @@ def export_and_zoo_inputs(work: Path, env: dict[str, str], base: Path) -> list[O
     if code != 0:
         return [Outcome("inputs", "exporting the base checkpoint", code, 0, "setup failed", out[-200:])]
     sidecar = json.loads(Path(f"{model}.json").read_text())
-    edits = {"fov_rad": lambda s: s["sensor"].update(fov_rad=1.0),
-             "command_limits": lambda s: s.update(command_limits=[9.0, 2.0]),
-             "fingerprint": lambda s: s["scenario"].update(fingerprint="0123456789abcdef"),
-             "dt_s": lambda s: s["control"].update(dt_s=0.05),
-             "scenario config": lambda s: s["scenario"]["config"]["pursuer"]["sensor"].update(range=9.0)}
+    edits = {
+        "fov_rad": lambda s: s["sensor"].update(fov_rad=1.0),
+        "command_limits": lambda s: s.update(command_limits=[9.0, 2.0]),
+        "fingerprint": lambda s: s["scenario"].update(fingerprint="0123456789abcdef"),
+        "dt_s": lambda s: s["control"].update(dt_s=0.05),
+        "scenario config": lambda s: s["scenario"]["config"]["pursuer"]["sensor"].update(range=9.0),
+    }
     for name, edit in edits.items():
         copy = work / "export" / f"edited-{name.replace(' ', '-')}.onnx"
         copy.write_bytes(model.read_bytes())
@@ -185,14 +223,24 @@ def export_and_zoo_inputs(work: Path, env: dict[str, str], base: Path) -> list[O
     role = zoo / "run" / "pursuer"
     (role / "empty.zip").write_bytes(b"")
     shutil.copy(role / "final.json", role / "empty.json")
-    ratings = [{"name": "empty", "spec": str(role / "empty.zip"), "role": "pursuer", "elo": 1500.0, "stderr": 1.0},
-               {"name": "final", "spec": str(role / "final.zip"), "role": "pursuer", "elo": 1000.0, "stderr": 1.0}]
+    ratings = [
+        {"name": "empty", "spec": str(role / "empty.zip"), "role": "pursuer", "elo": 1500.0, "stderr": 1.0},
+        {"name": "final", "spec": str(role / "final.zip"), "role": "pursuer", "elo": 1000.0, "stderr": 1.0},
+    ]
     (zoo / "tournament").mkdir()
     (zoo / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
     code, out = pecli(["zoo", "best", "pursuer", str(zoo)], env)
     named = out.strip().splitlines()[-1] if out.strip() else ""
-    outcomes.append(Outcome("inputs", "zoo best, top-rated checkpoint empty", code, 0,
-                            "refused" if code == 0 and named.endswith("final.zip") else "accepted", named[-80:]))
+    outcomes.append(
+        Outcome(
+            "inputs",
+            "zoo best, top-rated checkpoint empty",
+            code,
+            0,
+            "refused" if code == 0 and named.endswith("final.zip") else "accepted",
+            named[-80:],
+        )
+    )
     foreign = zoo / "photos.zip"
     with zipfile.ZipFile(foreign, "w") as archive:
         archive.writestr("holiday.jpg", b"\xff\xd8")
@@ -223,7 +271,7 @@ def non_finite_checkpoints(folder: Path) -> tuple[int, int]:
     return total, broken
 
 
-POISON = '''
+POISON = """
 import io, math, shutil, sys, zipfile
 from pathlib import Path
 import torch
@@ -239,9 +287,9 @@ with zipfile.ZipFile(checkpoint) as source, zipfile.ZipFile(out, "w") as copy:
             data = buffer.getvalue()
         copy.writestr(entry, data)
 shutil.copy(checkpoint.with_suffix(".json"), out.with_suffix(".json"))
-'''
+"""
 
-CONTROLLER = '''
+CONTROLLER = """
 import math, sys
 from pathlib import Path
 import numpy as np
@@ -267,33 +315,44 @@ for tick in range(20):
         sys.exit(1)
     sent += int(not np.isfinite(command).all())
 print("non-finite commands returned:", sent)
-'''
+"""
 
 
 def nan_policies(work: Path, env: dict[str, str], base: Path) -> list[Outcome]:
     outcomes = []
-    for command in (["train", "pursuer", "--steps", "3000", "--set", "checkpoint_every=1"],
-                    ["selfplay", "--rounds", "2", "--steps-per-round", "400"]):
+    for command in (
+        ["train", "pursuer", "--steps", "3000", "--set", "checkpoint_every=1"],
+        ["selfplay", "--rounds", "2", "--steps-per-round", "400"],
+    ):
         zoo = work / f"zoo-nan-{command[0]}"
-        code, out = pecli([*command, "-c", "quick", "--zoo", str(zoo), "--name", "lr", *TINY,
-                           "--set", "learning_rate=1e30"], env)
+        code, out = pecli(
+            [*command, "-c", "quick", "--zoo", str(zoo), "--name", "lr", *TINY, "--set", "learning_rate=1e30"], env
+        )
         total, broken = non_finite_checkpoints(zoo)
         outcome = judge("nan", f"{command[0]} --set learning_rate=1e30", code, out)
         outcome.detail = f"{total} checkpoints written, {broken} with NaN weights; {outcome.detail}"[:200]
         outcome.verdict = f"{broken} NaN written, " + outcome.verdict
         outcomes.append(outcome)
     poisoned = base / "pursuer" / "poisoned.zip"
-    done = subprocess.run([sys.executable, "-c", POISON, str(base / "pursuer" / "final.zip"), str(poisoned)], env=env,
-                          capture_output=True, text=True, cwd=NEUTRAL)
+    done = subprocess.run(
+        [sys.executable, "-c", POISON, str(base / "pursuer" / "final.zip"), str(poisoned)],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=NEUTRAL,
+    )
     if done.returncode != 0:
-        return outcomes + [Outcome("nan", "poisoning a checkpoint", done.returncode, 0, "setup failed", done.stderr[-200:])]
+        return outcomes + [
+            Outcome("nan", "poisoning a checkpoint", done.returncode, 0, "setup failed", done.stderr[-200:])
+        ]
     code, out = pecli(["export", "onnx", str(poisoned), "-n", "1"], env)
     written = poisoned.with_suffix(".onnx").is_file()
     outcome = judge("nan", "export onnx of a checkpoint with NaN weights", code, out)
     outcome.verdict = f"{int(written)} NaN exported, " + outcome.verdict
     outcomes.append(outcome)
-    done = subprocess.run([sys.executable, "-c", CONTROLLER, str(poisoned)], env=env, capture_output=True, text=True,
-                          cwd=NEUTRAL)
+    done = subprocess.run(
+        [sys.executable, "-c", CONTROLLER, str(poisoned)], env=env, capture_output=True, text=True, cwd=NEUTRAL
+    )
     outcome = judge("nan", "robot Controller.step on a NaN network", done.returncode, done.stderr + done.stdout)
     if done.returncode == 0:
         outcome.verdict = "NaN commands returned"
@@ -328,10 +387,31 @@ def kills(work: Path, env: dict[str, str], tries: int) -> list[Outcome]:
     for signal_name in ("SIGKILL", "SIGTERM"):
         for attempt in range(tries):
             out = work / f"kill-{signal_name}-{attempt}"
-            driver = subprocess.Popen([sys.executable, "-m", "pecli", "tournament", "--baselines", "stalling:StallingEvader",
-                                       "-c", "quick", "-n", "4", "--seeds", "1", "--workers", "2", "--out", str(out)],
-                                      env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                      preexec_fn=limit_memory)
+            driver = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "pecli",
+                    "tournament",
+                    "--baselines",
+                    "stalling:StallingEvader",
+                    "-c",
+                    "quick",
+                    "-n",
+                    "4",
+                    "--seeds",
+                    "1",
+                    "--workers",
+                    "2",
+                    "--out",
+                    str(out),
+                ],
+                env=env,
+                cwd=work,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                preexec_fn=limit_memory,
+            )
             deadline = time.monotonic() + 300
             while driver.poll() is None and not any((out / "pairings").glob("*.json")) and time.monotonic() < deadline:
                 time.sleep(0.1)
@@ -342,8 +422,16 @@ def kills(work: Path, env: dict[str, str], tries: int) -> list[Outcome]:
             orphans = children & set(live_parents())
             for pid in orphans:
                 os.kill(pid, signal.SIGKILL)
-            outcomes.append(Outcome("kills", f"tournament --workers 2, {signal_name} #{attempt + 1}", driver.returncode,
-                                    0, f"{len(orphans)} orphans", f"{len(children)} child processes before the kill"))
+            outcomes.append(
+                Outcome(
+                    "kills",
+                    f"tournament --workers 2, {signal_name} #{attempt + 1}",
+                    driver.returncode,
+                    0,
+                    f"{len(orphans)} orphans",
+                    f"{len(children)} child processes before the kill",
+                )
+            )
     return outcomes
 
 
@@ -352,8 +440,20 @@ def writers(work: Path, env: dict[str, str], base: Path, tries: int) -> list[Out
     outcomes = []
     for attempt in range(tries):
         out = work / f"writers-tournament-{attempt}"
-        args = ["tournament", "--baselines", "-c", "quick", "-n", "300", "--seeds", "2", "--workers", "1",
-                "--out", str(out)]
+        args = [
+            "tournament",
+            "--baselines",
+            "-c",
+            "quick",
+            "-n",
+            "300",
+            "--seeds",
+            "2",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+        ]
         codes, errors = concurrently([args, args], env)
         outcomes.append(writer_outcome(f"two tournaments, one --out #{attempt + 1}", codes, errors))
     for attempt in range(tries):
@@ -368,9 +468,17 @@ def writers(work: Path, env: dict[str, str], base: Path, tries: int) -> list[Out
 def concurrently(commands: list[list[str]], env: dict[str, str]) -> tuple[list[int], list[str]]:
     processes = []
     for args in commands:
-        processes.append(subprocess.Popen([sys.executable, "-m", "pecli", *args], env=env, cwd=NEUTRAL,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                          preexec_fn=limit_memory))
+        processes.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "pecli", *args],
+                env=env,
+                cwd=NEUTRAL,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+                preexec_fn=limit_memory,
+            )
+        )
         time.sleep(0.5)
     errors = [p.communicate(timeout=600)[1] for p in processes]
     return [p.returncode for p in processes], errors
@@ -400,18 +508,26 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="pecli-reliability-") as tmp:
         work = Path(tmp)
         base = work / "zoo-base" / "base"
-        code, out = pecli(["train", "pursuer", "-c", "quick", "--zoo", str(base.parent), "--name", "base",
-                           "--steps", "300", *TINY], env)
+        code, out = pecli(
+            ["train", "pursuer", "-c", "quick", "--zoo", str(base.parent), "--name", "base", "--steps", "300", *TINY],
+            env,
+        )
         if code != 0:
             raise SystemExit(f"cannot train the base run: {out}")
-        parts = {"inputs": lambda: bad_inputs(work, env, base), "nan": lambda: nan_policies(work, env, base),
-                 "kills": lambda: kills(work, environment(args.source, work), args.tries),
-                 "writers": lambda: writers(work, env, base, args.tries)}
+        parts = {
+            "inputs": lambda: bad_inputs(work, env, base),
+            "nan": lambda: nan_policies(work, env, base),
+            "kills": lambda: kills(work, environment(args.source, work), args.tries),
+            "writers": lambda: writers(work, env, base, args.tries),
+        }
         for name in args.only:
             for o in parts[name]():
                 outcomes.append(o)
-                print(f"| {o.part} | {o.case} | {o.exit_code} | {o.error_lines} | {o.verdict} | "
-                      f"{o.detail.replace('|', '/')} |", flush=True)
+                print(
+                    f"| {o.part} | {o.case} | {o.exit_code} | {o.error_lines} | {o.verdict} | "
+                    f"{o.detail.replace('|', '/')} |",
+                    flush=True,
+                )
             write(outcomes, args.out)
     print(json.dumps(write(outcomes, args.out), indent=1))
 

@@ -39,14 +39,44 @@ REFERENCE = {"pursuer": "pure-pursuit", "evader": "greedy"}
 
 def train(args: argparse.Namespace, run: Path) -> float:
     """Run (or resume) the self-play; returns the CPU seconds the command used."""
-    command = [sys.executable, "-m", "pecli", "selfplay", "--config", args.config, "--rounds", str(args.rounds),
-               "--steps-per-round", str(args.steps_per_round), "--opponents", args.opponents, "--seed", str(args.seed),
-               "--zoo", str(run.parent), "--name", run.name, "--quiet"]
+    command = [
+        sys.executable,
+        "-m",
+        "pecli",
+        "selfplay",
+        "--config",
+        args.config,
+        "--rounds",
+        str(args.rounds),
+        "--steps-per-round",
+        str(args.steps_per_round),
+        "--opponents",
+        args.opponents,
+        "--seed",
+        str(args.seed),
+        "--zoo",
+        str(run.parent),
+        "--name",
+        run.name,
+        "--quiet",
+    ]
     if args.belief:
         command += ["--belief", args.belief]
     if (run / "selfplay.json").exists():  # resume: the run keeps its own settings
-        command = [sys.executable, "-m", "pecli", "selfplay", "--rounds", str(args.rounds), "--zoo", str(run.parent),
-                   "--name", run.name, "--resume", "--quiet"]
+        command = [
+            sys.executable,
+            "-m",
+            "pecli",
+            "selfplay",
+            "--rounds",
+            str(args.rounds),
+            "--zoo",
+            str(run.parent),
+            "--name",
+            run.name,
+            "--resume",
+            "--quiet",
+        ]
     print("$", " ".join(command[2:]), flush=True)
     before = os.times()
     subprocess.run(command, check=True)
@@ -66,7 +96,8 @@ def round_robin(run: Path, scenario, episodes: int, workers: int):
     extra = find_players([], scenario, baselines=True).players
     for role in players:
         players[role] = [p for p in extra[role] if p.spec == REFERENCE[role]] + sorted(
-            players[role], key=lambda p: generation(Path(p.spec).stem))
+            players[role], key=lambda p: generation(Path(p.spec).stem)
+        )
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
     results = run_tournament(scenario, players, pairings, episodes, [0], run / "generations", workers=workers)
     grid = results.grid()
@@ -147,11 +178,20 @@ def main() -> None:
     for label, row in zip(labels["pursuer"], rates):
         print(f"{label:<{width}}" + "".join(f"{v:9.2f}" for v in row))
     pursuer, evader = claims(rates)
-    print(f"\nlater pursuers beat older evaders more often than earlier pursuers did: {pursuer:.2f} of pairs (> 0.5: yes)")
-    print(f"later evaders escape older pursuers more often than earlier evaders did: {evader:.2f} of pairs (> 0.5: yes)")
+    print(
+        f"\nlater pursuers beat older evaders more often than earlier pursuers did: {pursuer:.2f} of pairs (> 0.5: yes)"
+    )
+    print(
+        f"later evaders escape older pursuers more often than earlier evaders did: {evader:.2f} of pairs (> 0.5: yes)"
+    )
     steps = scenario.training.selfplay.steps_per_round
-    heatmap(rates, labels, args.out, f"{run.name}: capture rate, generation vs generation\n"
-                                      f"{steps:,} steps per side per round, {args.episodes} episodes per cell")
+    heatmap(
+        rates,
+        labels,
+        args.out,
+        f"{run.name}: capture rate, generation vs generation\n"
+        f"{steps:,} steps per side per round, {args.episodes} episodes per cell",
+    )
     print(f"heatmap: {args.out}")
 
 

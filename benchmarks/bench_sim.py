@@ -56,8 +56,10 @@ def pettingzoo_steps(make_env, steps: int, repeats: int) -> float:
     env = make_env()
     env.reset(seed=0)
     rng = np.random.default_rng(0)
-    samples = {agent: rng.uniform(-1, 1, (64, *env.action_space(agent).shape)).astype(np.float32)
-               for agent in env.possible_agents}
+    samples = {
+        agent: rng.uniform(-1, 1, (64, *env.action_space(agent).shape)).astype(np.float32)
+        for agent in env.possible_agents
+    }
     low = {agent: env.action_space(agent).low for agent in env.possible_agents}
     high = {agent: env.action_space(agent).high for agent in env.possible_agents}
     samples = {agent: np.clip(np.abs(samples[agent]), low[agent], high[agent]) for agent in samples}
@@ -100,8 +102,10 @@ def main() -> None:
         print(json.dumps(results, indent=2))
         return
     reference = results.get("mpe2 simple_tag_v3")
-    print(f"scenario {scenario.name}, {platform.processor() or platform.machine()}, numpy {np.__version__}, "
-          f"median of {args.repeats}")
+    print(
+        f"scenario {scenario.name}, {platform.processor() or platform.machine()}, numpy {np.__version__}, "
+        f"median of {args.repeats}"
+    )
     print("| what | steps/s | vs simple_tag_v3 |")
     print("| --- | ---: | ---: |")
     for name, rate in results.items():

@@ -76,8 +76,14 @@ def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
     experiment_from_dict(copy.deepcopy(data), str(path), base=path.parent)  # the file as written is valid
     if args.config is not None:
         data["scenario"] = args.config
-    given = {"kinds": args.beliefs, "seeds": args.seeds, "schedules": args.schedules, "cpu_hours": args.cpu_hours,
-             "rounds": args.rounds, "steps_per_round": args.steps_per_round}
+    given = {
+        "kinds": args.beliefs,
+        "seeds": args.seeds,
+        "schedules": args.schedules,
+        "cpu_hours": args.cpu_hours,
+        "rounds": args.rounds,
+        "steps_per_round": args.steps_per_round,
+    }
     data["runs"].update({key: value for key, value in given.items() if value is not None})
     return experiment_from_dict(data, str(path), base=path.parent).runs()
 
@@ -92,34 +98,56 @@ def train(args: argparse.Namespace) -> None:
         print(f"{run.name}: {run_cpu_hours(args.zoo / run.name):.2f} {limit}", flush=True)
         try:
             with sigterm_stops():  # `kill` (or a job's time limit) commits and stops like Ctrl-C
-                outcome = execute_run(run, args.zoo, progress=sys.stderr.isatty(),  # a log gets a line a round
-                                      report=lambda line, name=run.name: print(f"{name}: {line}", flush=True))
+                outcome = execute_run(
+                    run,
+                    args.zoo,
+                    progress=sys.stderr.isatty(),  # a log gets a line a round
+                    report=lambda line, name=run.name: print(f"{name}: {line}", flush=True),
+                )
         except SelfPlayInterrupted as stop:
             sys.exit(f"{run.name}: stopped in {stop}; its finished work is kept: run the same command to continue")
         except KeyboardInterrupt:  # before its first round started: nothing of it to keep yet
             sys.exit(f"{run.name}: stopped; run the same command to continue")
         did = "trained before" if outcome["did"] == "finished" else f"{outcome['did']} by this command"
-        print(f"{run.name}: to round {outcome['progress']['round']}, {run_cpu_hours(args.zoo / run.name):.2f} CPU-h "
-              f"({did})", flush=True)
+        print(
+            f"{run.name}: to round {outcome['progress']['round']}, {run_cpu_hours(args.zoo / run.name):.2f} CPU-h "
+            f"({did})",
+            flush=True,
+        )
 
 
 def picked(args: argparse.Namespace, average: int = 1, averaged: tuple[str, ...] = ("pursuer",)) -> dict:
-    return main_players(args.zoo, args.cpu_hours, args.round, average, averaged, pattern=RUN_NAME,
-                        report=lambda line: print(line, file=sys.stderr))
+    return main_players(
+        args.zoo,
+        args.cpu_hours,
+        args.round,
+        average,
+        averaged,
+        pattern=RUN_NAME,
+        report=lambda line: print(line, file=sys.stderr),
+    )
 
 
 def missed_targets(result: Comparison) -> list[str]:
     missed = []
     for row in result.rows:
-        missed += [f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['heuristics']}" for e in HEURISTIC_EVADERS
-                   if row.scripted[e] < TARGETS["heuristics"]]
-        missed += [f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['adversaries']}" for e in ADVERSARIES
-                   if row.scripted[e] < TARGETS["adversaries"]]
+        missed += [
+            f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['heuristics']}"
+            for e in HEURISTIC_EVADERS
+            if row.scripted[e] < TARGETS["heuristics"]
+        ]
+        missed += [
+            f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['adversaries']}"
+            for e in ADVERSARIES
+            if row.scripted[e] < TARGETS["adversaries"]
+        ]
         if row.cross_play is not None and row.cross_play < TARGETS["cross-play"]:
             missed.append(f"{row.run} cross-play: {row.cross_play:.3f} < {TARGETS['cross-play']}")
         if row.held_by_pure_pursuit > TARGETS["pure-pursuit held to"]:
-            missed.append(f"{row.run}'s evader lets pure pursuit capture {row.held_by_pure_pursuit:.3f} > "
-                          f"{TARGETS['pure-pursuit held to']}")
+            missed.append(
+                f"{row.run}'s evader lets pure pursuit capture {row.held_by_pure_pursuit:.3f} > "
+                f"{TARGETS['pure-pursuit held to']}"
+            )
     return missed
 
 
@@ -137,7 +165,9 @@ def report(args: argparse.Namespace) -> None:
     result = compare_arms({"zoo": runs}, load_scenario(args.config), args.zoo / "report", args.episodes, args.workers)
     print("\n".join(result.lines()[2:]))  # the table: one arm, no A/B
     faced = {run: evaders for (_, run), evaders in result.faced.items()}
-    faced = {run: {(e[1] if isinstance(e, tuple) else e): r for e, r in evaders.items()} for run, evaders in faced.items()}
+    faced = {
+        run: {(e[1] if isinstance(e, tuple) else e): r for e, r in evaders.items()} for run, evaders in faced.items()
+    }
     groups: dict[tuple[str, str], list[str]] = {}  # (schedule, belief) -> its runs
     for name in runs:
         training = read_yaml(args.zoo / name / "config.yaml")["training"]
@@ -145,27 +175,39 @@ def report(args: argparse.Namespace) -> None:
         opponents = selfplay.get("opponents")
         schedule = opponents if opponents in ("league", "nash") else selfplay.get("schedule", "alternating")
         groups.setdefault((schedule, training["belief"]), []).append(name)
-    budget = f"at {args.cpu_hours} CPU-h" if args.cpu_hours is not None else f"after round {args.round}" \
-        if args.round is not None else "at each run's newest round (not an equal budget: give --cpu-hours)"
+    budget = (
+        f"at {args.cpu_hours} CPU-h"
+        if args.cpu_hours is not None
+        else f"after round {args.round}"
+        if args.round is not None
+        else "at each run's newest round (not an equal budget: give --cpu-hours)"
+    )
     print(f"\npursuers pooled over every evader (scripted and cross-play) and seed, {budget}:")
     for schedule in sorted({s for s, _ in groups}):
         kinds = {b: (pool(faced, names), len(names)) for (s, b), names in sorted(groups.items()) if s == schedule}
-        print(f"- {schedule}: " + ", ".join(f"{b} {c / n:.3f} ({k} run{'s' * (k > 1)})"
-                                              for b, ((c, n), k) in kinds.items()))
+        print(
+            f"- {schedule}: "
+            + ", ".join(f"{b} {c / n:.3f} ({k} run{'s' * (k > 1)})" for b, ((c, n), k) in kinds.items())
+        )
     for (first, belief), (second, other) in ((a, b) for a in sorted(groups) for b in sorted(groups)):
         if belief == other and first < second:
             common, rate_a, rate_b, p = contrast(faced, groups[(first, belief)], groups[(second, belief)])
-            print(f"- {belief}: {first} {rate_a:.3f} vs {second} {rate_b:.3f} over the {len(common)} evaders all met:"
-                  f" z-test p = {p:.2g}; per run {per_run(faced, {first: groups[(first, belief)], second: groups[(second, belief)]}, common)}")
+            pair = {first: groups[(first, belief)], second: groups[(second, belief)]}
+            print(
+                f"- {belief}: {first} {rate_a:.3f} vs {second} {rate_b:.3f} over the {len(common)} evaders all met:"
+                f" z-test p = {p:.2g}; per run {per_run(faced, pair, common)}"
+            )
     missed = missed_targets(result)
     for schedule in sorted({s for s, b in groups if b == "bimdn" and (s, "none") in groups}):
         sides = {"bimdn": groups[(schedule, "bimdn")], "none": groups[(schedule, "none")]}
         every, rate_b, rate_n, p, excess, p_stratified = over_every_evader(faced, sides["bimdn"], sides["none"])
         met = rate_b > rate_n and p < 0.05 and excess > 0 and p_stratified < 0.05
-        print(f"\n{schedule}: bimdn pursuers {rate_b:.3f} vs none {rate_n:.3f} over every evader a pursuer of each kind "
-              f"met ({len(every)}): z-test p = {p:.2g}; stratified by evader (Mantel-Haenszel) {excess:+.1f} "
-              f"captures, p = {p_stratified:.2g} ({'met' if met else 'NOT met'}: bimdn must capture more, p < 0.05 in "
-              f"both); per run {per_run(faced, sides, every)}")
+        print(
+            f"\n{schedule}: bimdn pursuers {rate_b:.3f} vs none {rate_n:.3f} over every evader a pursuer of each kind "
+            f"met ({len(every)}): z-test p = {p:.2g}; stratified by evader (Mantel-Haenszel) {excess:+.1f} "
+            f"captures, p = {p_stratified:.2g} ({'met' if met else 'NOT met'}: bimdn must capture more, p < 0.05 in "
+            f"both); per run {per_run(faced, sides, every)}"
+        )
         if not met:
             missed.append(f"{schedule}: bimdn pursuers capture more than none over every evader")
     print("\ntargets missed:" if missed else "\nevery target met", *missed, sep="\n- " if missed else "")
@@ -176,34 +218,50 @@ def exploit(args: argparse.Namespace) -> None:
     from pecli.exploit import exploit_pair
 
     if args.handed_over:
-        runs = {run.name: RunPlayers(run / "pursuer" / AVERAGE_FILE, run / "evader" / AVERAGE_FILE, 0, 0.0)
-                for run in sorted(p.parent for p in args.zoo.glob(f"*/{STATE_FILE}"))
-                if all((run / role / AVERAGE_FILE).is_file() for role in ("pursuer", "evader"))}
+        runs = {
+            run.name: RunPlayers(run / "pursuer" / AVERAGE_FILE, run / "evader" / AVERAGE_FILE, 0, 0.0)
+            for run in sorted(p.parent for p in args.zoo.glob(f"*/{STATE_FILE}"))
+            if all((run / role / AVERAGE_FILE).is_file() for role in ("pursuer", "evader"))
+        }
     else:
         runs = picked(args)
     runs = {name: players for name, players in runs.items() if not args.runs or name in args.runs}
     if not runs:
         sys.exit(f"no run to measure under {args.zoo}")
-    print(f"best responses of {args.cpu_minutes:g} CPU-minutes, {args.seeds} seeds"
-          f"{', fresh and warm-started' if args.warm else ''}, {args.episodes} held-out games; the strongest counts\n")
-    print("| run | pair | best evader holds the pursuer to | best pursuer catches the evader | NashConv [95 %] | "
-          "targets (>= 0.75, <= 0.25) |\n| --- | ---: | ---: | ---: | ---: | --- |")
+    print(
+        f"best responses of {args.cpu_minutes:g} CPU-minutes, {args.seeds} seeds"
+        f"{', fresh and warm-started' if args.warm else ''}, {args.episodes} held-out games; the strongest counts\n"
+    )
+    print(
+        "| run | pair | best evader holds the pursuer to | best pursuer catches the evader | NashConv [95 %] | "
+        "targets (>= 0.75, <= 0.25) |\n| --- | ---: | ---: | ---: | ---: | --- |"
+    )
     for name, players in runs.items():
         try:
             with sigterm_stops():
-                result = exploit_pair(str(players.pursuer), str(players.evader), load_scenario(args.config),
-                                      args.zoo / "exploit" / name, warm=args.warm, cpu_minutes=args.cpu_minutes,
-                                      seeds=tuple(range(args.seeds)), episodes=args.episodes,
-                                      report=lambda line: print(line, file=sys.stderr, flush=True))
+                result = exploit_pair(
+                    str(players.pursuer),
+                    str(players.evader),
+                    load_scenario(args.config),
+                    args.zoo / "exploit" / name,
+                    warm=args.warm,
+                    cpu_minutes=args.cpu_minutes,
+                    seeds=tuple(range(args.seeds)),
+                    episodes=args.episodes,
+                    report=lambda line: print(line, file=sys.stderr, flush=True),
+                )
         except KeyboardInterrupt:
             sys.exit(f"{name}: stopped; every response keeps its state: run the same command to continue")
         held = [r.capture_rate for r in result.against_pursuer.responses]
         caught = [r.capture_rate for r in result.against_evader.responses]
         low, high = result.interval
         met = [min(held) >= 0.75, result.nash_conv <= 0.25]
-        print(f"| {name} | {result.capture_rate:.2f} | {min(held):.2f} ({min(held):.2f}-{max(held):.2f}) | "
-              f"{max(caught):.2f} ({min(caught):.2f}-{max(caught):.2f}) | {result.nash_conv:.2f} [{low:.2f}, "
-              f"{high:.2f}] | {' / '.join('met' if m else 'missed' for m in met)} |", flush=True)
+        print(
+            f"| {name} | {result.capture_rate:.2f} | {min(held):.2f} ({min(held):.2f}-{max(held):.2f}) | "
+            f"{max(caught):.2f} ({min(caught):.2f}-{max(caught):.2f}) | {result.nash_conv:.2f} [{low:.2f}, "
+            f"{high:.2f}] | {' / '.join('met' if m else 'missed' for m in met)} |",
+            flush=True,
+        )
 
 
 def behaviour(args: argparse.Namespace) -> None:
@@ -213,13 +271,18 @@ def behaviour(args: argparse.Namespace) -> None:
     evaders = {name: resolve_policy(name, "evader", scenario, seed=2) for name in args.evaders}
     one_torch_thread()
     print(f"against {args.pursuer} on {scenario.name}, {args.episodes} games each (means over the steps they lasted)\n")
-    print("| evader | caught | seen by the pursuer | sees the pursuer | speed unseen / seeing (m/step) | distance "
-          "| to the nearest wall |\n| --- | ---: | ---: | ---: | --- | ---: | ---: |")
+    print(
+        "| evader | caught | seen by the pursuer | sees the pursuer | speed unseen / seeing (m/step) | distance "
+        "| to the nearest wall |\n| --- | ---: | ---: | ---: | --- | ---: | ---: |"
+    )
     for name, evader in evaders.items():
         _, recording = play_match(scenario, pursuer, evader, args.episodes, seed=0, record=args.episodes)
         m = Behaviour.of(recording)
-        print(f"| {name} | {m.caught:.2f} | {m.seen:.2f} | {m.sees:.2f} | {m.speed_unseen:.3f} / {m.speed_seeing:.3f} "
-              f"| {m.distance:.1f} m | {m.wall:.2f} m |", flush=True)
+        print(
+            f"| {name} | {m.caught:.2f} | {m.seen:.2f} | {m.sees:.2f} | {m.speed_unseen:.3f} / {m.speed_seeing:.3f} "
+            f"| {m.distance:.1f} m | {m.wall:.2f} m |",
+            flush=True,
+        )
 
 
 def main() -> None:
@@ -243,14 +306,24 @@ def main() -> None:
     probe.add_argument("--runs", nargs="+", default=None, help="only these runs (default: every run)")
     ranked = commands["report"]
     ranked.add_argument("--workers", type=int, default=2)
-    ranked.add_argument("--average", type=int, default=1, metavar="K",
-                        help="each run's pursuer: the mean of its weights over the last K rounds")
+    ranked.add_argument(
+        "--average",
+        type=int,
+        default=1,
+        metavar="K",
+        help="each run's pursuer: the mean of its weights over the last K rounds",
+    )
     ranked.add_argument("--average-evaders", action="store_true", help="with --average: the evaders too")
     learn = commands["train"]
     learn.add_argument("--config", default=None, help="the scenario (default: the experiment's)")
-    learn.add_argument("--experiment", default="strength", help="a built-in experiment or a YAML file of self-play "
-                       "runs; the options below replace its own")
-    learn.add_argument("--schedules", nargs="+", default=None, choices=["alternating", "simultaneous", "league", "nash"])
+    learn.add_argument(
+        "--experiment",
+        default="strength",
+        help="a built-in experiment or a YAML file of self-play runs; the options below replace its own",
+    )
+    learn.add_argument(
+        "--schedules", nargs="+", default=None, choices=["alternating", "simultaneous", "league", "nash"]
+    )
     learn.add_argument("--beliefs", nargs="+", default=None)
     learn.add_argument("--seeds", nargs="+", type=int, default=None)
     learn.add_argument("--cpu-hours", type=float, default=None)

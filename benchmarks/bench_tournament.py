@@ -66,7 +66,7 @@ def main() -> None:
     torch.set_num_threads(1)
     scenario = load_scenario(args.config)
     found = find_players(args.zoo, scenario, baselines=True).players
-    chosen = {role: players[-args.players:] for role, players in found.items()}
+    chosen = {role: players[-args.players :] for role, players in found.items()}
     pairings = schedule(chosen)
 
     batched_time = reference_time = 0.0
@@ -84,8 +84,10 @@ def main() -> None:
     print(f"{scenario.name}: {len(pairings)} pairings ({names}), one process, one torch thread")
     print("| how | episodes | episodes/s | ratio |")
     print("| --- | ---: | ---: | ---: |")
-    print(f"| batched pairings (pecli tournament) | {batched_episodes} | {batched_rate:,.1f} | "
-          f"{batched_rate / reference_rate:.0f}x |")
+    print(
+        f"| batched pairings (pecli tournament) | {batched_episodes} | {batched_rate:,.1f} | "
+        f"{batched_rate / reference_rate:.0f}x |"
+    )
     print(f"| one game at a time (PettingZoo env) | {reference_episodes} | {reference_rate:,.1f} | 1x |")
 
     if args.grid:
@@ -96,10 +98,14 @@ def main() -> None:
             run_tournament(scenario, found, grid, args.grid_episodes, seeds, Path(out), workers=args.workers)
             elapsed = time.perf_counter() - start
         total = len(grid) * args.grid_episodes * len(seeds)
-        print(f"\nfull grid: {len(found['pursuer'])} pursuers x {len(found['evader'])} evaders, "
-              f"{args.grid_episodes} x {len(seeds)} episodes per pairing, {args.workers} workers: "
-              f"{elapsed:.1f} s, {total / elapsed:,.0f} episodes/s")
-        print(f"an 8 x 8 grid of 1500 episodes per pairing would take about {64 * 1500 / (total / elapsed) / 60:.1f} min")
+        print(
+            f"\nfull grid: {len(found['pursuer'])} pursuers x {len(found['evader'])} evaders, "
+            f"{args.grid_episodes} x {len(seeds)} episodes per pairing, {args.workers} workers: "
+            f"{elapsed:.1f} s, {total / elapsed:,.0f} episodes/s"
+        )
+        print(
+            f"an 8 x 8 grid of 1500 episodes per pairing would take about {64 * 1500 / (total / elapsed) / 60:.1f} min"
+        )
 
 
 if __name__ == "__main__":

@@ -90,10 +90,20 @@ def speed(args: argparse.Namespace) -> None:
 
         env = DummyVecEnv([make] * t.n_envs)
         model = TD3(
-            "MlpPolicy", env, learning_rate=t.learning_rate, buffer_size=t.buffer_size, learning_starts=1000,
-            batch_size=t.batch_size, tau=t.tau, gamma=t.gamma, train_freq=(t.train_freq, "step"),
-            gradient_steps=t.gradient_steps, action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
-            policy_kwargs={"net_arch": list(t.net_arch)}, device="cpu", verbose=0,
+            "MlpPolicy",
+            env,
+            learning_rate=t.learning_rate,
+            buffer_size=t.buffer_size,
+            learning_starts=1000,
+            batch_size=t.batch_size,
+            tau=t.tau,
+            gamma=t.gamma,
+            train_freq=(t.train_freq, "step"),
+            gradient_steps=t.gradient_steps,
+            action_noise=NormalActionNoise(np.zeros(2), t.action_noise * np.ones(2)),
+            policy_kwargs={"net_arch": list(t.net_arch)},
+            device="cpu",
+            verbose=0,
         )
         start = time.perf_counter()
         model.learn(steps)
@@ -104,8 +114,10 @@ def speed(args: argparse.Namespace) -> None:
         results["pecli train"].append(ours())
         results["SB3 TD3 MlpPolicy + DummyVecEnv"].append(plain())
     reference = statistics.median(results["SB3 TD3 MlpPolicy + DummyVecEnv"])
-    print(f"{scenario.name}: {steps} transitions, {t.n_envs} envs, {t.gradient_steps} gradient steps per vector step, "
-          f"batch {t.batch_size}, 1 torch thread, median of {args.repeats}")
+    print(
+        f"{scenario.name}: {steps} transitions, {t.n_envs} envs, {t.gradient_steps} gradient steps per vector step, "
+        f"batch {t.batch_size}, 1 torch thread, median of {args.repeats}"
+    )
     print("| trainer | transitions/s | ratio |")
     print("| --- | ---: | ---: |")
     for name, rates in results.items():
@@ -130,7 +142,11 @@ def optimizer(args: argparse.Namespace) -> None:
     model = make_model(job, env, tensorboard=None)
     model.learning_starts = 2000
     model.learn(2000 + 16 * t.n_envs)  # a filled buffer, every network built
-    variants = {"for-loop (torch's CPU default)": {"foreach": False}, "foreach": {"foreach": True}, "fused": {"fused": True}}
+    variants = {
+        "for-loop (torch's CPU default)": {"foreach": False},
+        "foreach": {"foreach": True},
+        "fused": {"fused": True},
+    }
     results: dict[str, list[float]] = {name: [] for name in variants}
     for _ in range(args.repeats):
         for name, kwargs in variants.items():
@@ -140,8 +156,10 @@ def optimizer(args: argparse.Namespace) -> None:
             model.train(gradient_steps=args.steps, batch_size=t.batch_size)
             results[name].append((time.process_time() - start) / args.steps)
     reference = statistics.median(results["for-loop (torch's CPU default)"])
-    print(f"{scenario.name}: {t.algo}, batch {t.batch_size}, net {list(t.net_arch)}, {args.steps} gradient steps, "
-          f"1 torch thread, median of {args.repeats}")
+    print(
+        f"{scenario.name}: {t.algo}, batch {t.batch_size}, net {list(t.net_arch)}, {args.steps} gradient steps, "
+        f"1 torch thread, median of {args.repeats}"
+    )
     print("| Adam | ms per gradient step | ratio |")
     print("| --- | ---: | ---: |")
     for name, times in results.items():
@@ -168,8 +186,9 @@ def device(args: argparse.Namespace) -> None:
         t = scenario.training
         warm = max(t.learning_starts, t.belief_settings.warmup if belief != "none" else 0) + 16 * t.n_envs
         for name in devices:
-            job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench",
-                           device=name)
+            job = TrainJob(
+                role="pursuer", scenario=scenario, opponent="greedy", zoo=Path("unused"), name="bench", device=name
+            )
             _, model, fit = make_learner(job, resolve_policy("greedy", "evader", scenario), seed=0)
             model.learn(warm, callback=fit)  # a filled buffer, the BiMDN past its warm-up, every kernel built
             if name.startswith("cuda"):
@@ -180,9 +199,11 @@ def device(args: argparse.Namespace) -> None:
                 th.cuda.synchronize()
             rates[belief, name] = args.steps / (time.perf_counter() - start)
             print(f"{belief} on {name}: {rates[belief, name]:,.0f} transitions/s", flush=True)
-    print(f"{base.name}: the pursuer against greedy, {args.steps} transitions after a warm-up, {base.training.n_envs} "
-          f"envs, {base.training.gradient_steps} gradient steps per vector step, batch {base.training.batch_size}, "
-          f"1 torch thread on the CPU")
+    print(
+        f"{base.name}: the pursuer against greedy, {args.steps} transitions after a warm-up, {base.training.n_envs} "
+        f"envs, {base.training.gradient_steps} gradient steps per vector step, batch {base.training.batch_size}, "
+        f"1 torch thread on the CPU"
+    )
     print("| belief | device | transitions/s | ratio to cpu |")
     print("| --- | --- | ---: | ---: |")
     for (belief, name), rate in rates.items():
@@ -203,9 +224,19 @@ def curves(args: argparse.Namespace) -> None:
             if args.resume:  # the run's own settings and budget; its CPU time continues from its checkpoint
                 command += ["--resume"]
             else:
-                command += ["-c", args.config, "--seed", str(seed), "--steps", str(args.max_steps),
-                            "--belief", args.belief, "--set", f"eval_every={args.eval_every}",
-                            *sum((["--set", s] for s in args.set), [])]
+                command += [
+                    "-c",
+                    args.config,
+                    "--seed",
+                    str(seed),
+                    "--steps",
+                    str(args.max_steps),
+                    "--belief",
+                    args.belief,
+                    "--set",
+                    f"eval_every={args.eval_every}",
+                    *sum((["--set", s] for s in args.set), []),
+                ]
             print("started:", " ".join(command[1:]), flush=True)
             running.append((seed, subprocess.Popen(command, cwd=ROOT)))
         time.sleep(5)
@@ -267,8 +298,11 @@ def report(args: argparse.Namespace) -> None:
     ax.set_title(f"pecli train pursuer, {' vs '.join(groups)}, belief {args.belief}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = args.out or ROOT / "docs" / (f"learning_curves_{args.belief}.png" if args.config == "paper" and not args.label
-                                       else f"learning_curves_{'_vs_'.join(groups)}_{args.belief}.png")
+    out = args.out or ROOT / "docs" / (
+        f"learning_curves_{args.belief}.png"
+        if args.config == "paper" and not args.label
+        else f"learning_curves_{'_vs_'.join(groups)}_{args.belief}.png"
+    )
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
 
@@ -325,8 +359,10 @@ def selfplay(args: argparse.Namespace) -> None:
                 (run / "done").write_text("all rounds\n" if process.returncode == 0 else f"{args.minutes}\n")
             used = sum(t["cpu_seconds"] for t in _turns(run))
             print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
-    print(f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
-          f"{args.configs[0]} evader | rounds |")
+    print(
+        f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
+        f"{args.configs[0]} evader | rounds |"
+    )
     print("| ---: | ---: | ---: | --- |")
     for seed in args.seeds:
         final = {}
@@ -337,14 +373,29 @@ def selfplay(args: argparse.Namespace) -> None:
             print(f"| {seed} | - | - | a run has no finished round yet |")
             continue
         a, b = args.configs[:2]
-        rates = [_capture_rate(final[x]["pursuer"], final[y]["evader"], args.episodes, seed) for x, y in ((a, b), (b, a))]
+        rates = [
+            _capture_rate(final[x]["pursuer"], final[y]["evader"], args.episodes, seed) for x, y in ((a, b), (b, a))
+        ]
         rounds = " / ".join(str(len(_turns(SELFPLAY / f"{Path(c).stem}-s{seed}")) // 2) for c in (a, b))
         print(f"| {seed} | {rates[0]:.3f} | {rates[1]:.3f} | {rounds} |", flush=True)
 
 
 def _capture_rate(pursuer: Path, evader: Path, episodes: int, seed: int) -> float:
-    command = [sys.executable, "-m", "pecli", "play", "--pursuer", str(pursuer), "--evader", str(evader),
-               "--episodes", str(episodes), "--seed", str(10_000 + seed), "--json"]
+    command = [
+        sys.executable,
+        "-m",
+        "pecli",
+        "play",
+        "--pursuer",
+        str(pursuer),
+        "--evader",
+        str(evader),
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(10_000 + seed),
+        "--json",
+    ]
     output = subprocess.run(command, cwd=ROOT, check=True, capture_output=True, text=True).stdout
     return float(json.loads(output)["capture_rate"])
 
@@ -372,28 +423,46 @@ def main() -> None:
     c.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per seed")
     c.add_argument("--jobs", type=int, default=2)
     c.add_argument("--eval-every", type=int, default=25000)
-    c.add_argument("--max-steps", type=int, default=600_000,
-                   help="the training budget; the curriculum spans its first 30 %% (paper.yaml)")
+    c.add_argument(
+        "--max-steps",
+        type=int,
+        default=600_000,
+        help="the training budget; the curriculum spans its first 30 %% (paper.yaml)",
+    )
     c.add_argument("--set", action="append", default=[], help="extra training settings, KEY=VALUE")
     c.add_argument("--label", help="names the runs instead of --config (for a variant made with --set)")
-    c.add_argument("--resume", action="store_true",
-                   help="continue stopped runs (pecli train --resume) until --minutes of their CPU time in all")
+    c.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue stopped runs (pecli train --resume) until --minutes of their CPU time in all",
+    )
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")
     r.add_argument("--belief", default="none")
     r.add_argument("--at", type=float, nargs="+", default=[10.0, 30.0], help="CPU budgets to report (minutes)")
     r.add_argument("--out", type=Path, default=None, help="the plot (default: docs/learning_curves_...png)")
     r.add_argument("--label", help="the --label the curves were run with")
-    r.add_argument("--compare", nargs="+", default=[], metavar="LABEL",
-                   help="other curves to draw on the same plot, each in its colour (their --label or --config)")
+    r.add_argument(
+        "--compare",
+        nargs="+",
+        default=[],
+        metavar="LABEL",
+        help="other curves to draw on the same plot, each in its colour (their --label or --config)",
+    )
     p = sub.add_parser("selfplay")
     p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
     p.add_argument("--episodes", type=int, default=500)
     args = parser.parse_args()
-    steps = {"speed": speed, "optimizer": optimizer, "device": device, "curves": curves, "report": report,
-             "selfplay": selfplay}
+    steps = {
+        "speed": speed,
+        "optimizer": optimizer,
+        "device": device,
+        "curves": curves,
+        "report": report,
+        "selfplay": selfplay,
+    }
     steps[args.step](args)
 
 

@@ -56,14 +56,17 @@ def rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
 def plant_in_data(path: Path, marker: Path) -> None:
     with zipfile.ZipFile(path) as archive:
         data = json.loads(archive.read("data"))
-    data["policy_class"] = {":type:": "<class 'type'>",
-                            ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode()}
+    data["policy_class"] = {
+        ":type:": "<class 'type'>",
+        ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode(),
+    }
     rewrite_zip(path, {"data": json.dumps(data).encode()})
 
 
 def plant_in_entry(entry: str):
     def plant(path: Path, marker: Path) -> None:
         rewrite_zip(path, {entry: pickle.dumps(Payload(marker))})
+
     return plant
 
 
@@ -90,29 +93,66 @@ def plant_as_older_pecli(path: Path, marker: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/bench_untrusted"))
-    parser.add_argument("--part", choices=["all", "payloads", "records"], default="all",
-                        help="planted payloads, hostile records, or both")
+    parser.add_argument(
+        "--part",
+        choices=["all", "payloads", "records"],
+        default="all",
+        help="planted payloads, hostile records, or both",
+    )
     args = parser.parse_args()
     out = args.out.resolve()
     shutil.rmtree(out, ignore_errors=True)
     clean = out / "clean"
-    tiny = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
-            "--set", "net_arch=[16,16]", "--set", "n_envs=4", "--set", "checkpoint_every=5"]
-    made = pecli("train", "pursuer", "-c", "quick", "--steps", "800", "--name", "victim", "--zoo", str(clean), "-q", *tiny)
+    tiny = [
+        "--set",
+        "buffer_size=2000",
+        "--set",
+        "batch_size=32",
+        "--set",
+        "learning_starts=100",
+        "--set",
+        "net_arch=[16,16]",
+        "--set",
+        "n_envs=4",
+        "--set",
+        "checkpoint_every=5",
+    ]
+    made = pecli(
+        "train", "pursuer", "-c", "quick", "--steps", "800", "--name", "victim", "--zoo", str(clean), "-q", *tiny
+    )
     if made.returncode != 0:
         sys.exit(made.stdout + made.stderr)
 
     def commands(zoo: Path, checkpoint: Path) -> dict[str, list[str]]:
         return {
             "play": ["play", "-p", str(checkpoint), "-e", "greedy", "-n", "4"],
-            "tournament": ["tournament", str(zoo), "--baselines", "--episodes", "4", "--seeds", "1",
-                           "--out", str(zoo / "t")],
+            "tournament": [
+                "tournament",
+                str(zoo),
+                "--baselines",
+                "--episodes",
+                "4",
+                "--seeds",
+                "1",
+                "--out",
+                str(zoo / "t"),
+            ],
             "export onnx": ["export", "onnx", str(checkpoint), "--out", str(zoo / "x.onnx")],
             "zoo list": ["zoo", "list", str(zoo)],
             "zoo show": ["zoo", "show", str(checkpoint)],
             "zoo best": ["zoo", "best", "pursuer", str(zoo)],
-            "train --resume": ["train", "pursuer", "--name", "victim", "--zoo", str(zoo), "--resume", "-q",
-                               "--steps", "1000"],
+            "train --resume": [
+                "train",
+                "pursuer",
+                "--name",
+                "victim",
+                "--zoo",
+                str(zoo),
+                "--resume",
+                "-q",
+                "--steps",
+                "1000",
+            ],
         }
 
     if args.part == "records":
@@ -174,11 +214,23 @@ def hostile_records(out: Path, clean: Path) -> None:
         marker = zoo / "PAYLOAD_RAN"
         setup(zoo, run, marker, victim)
         args = [arg.format(zoo=zoo, run=run) for arg in command]
-        result = subprocess.run([sys.executable, "-m", "pecli", *args], capture_output=True, text=True, cwd=zoo,
-                                env={**__import__("os").environ, **(env or {})})
+        result = subprocess.run(
+            [sys.executable, "-m", "pecli", *args],
+            capture_output=True,
+            text=True,
+            cwd=zoo,
+            env={**__import__("os").environ, **(env or {})},
+        )
         payload = marker.exists() or victim.read_text() != "keep\n"
-        kind = "payload" if payload else "refused" if result.returncode == 1 else "accepted" \
-            if result.returncode == 0 else "internal"
+        kind = (
+            "payload"
+            if payload
+            else "refused"
+            if result.returncode == 1
+            else "accepted"
+            if result.returncode == 0
+            else "internal"
+        )
         lines = [line for line in (result.stderr + result.stdout).splitlines() if line.startswith("error")]
         return label, kind, lines[0][:110] if lines else ""
 
@@ -206,6 +258,7 @@ def hostile_records(out: Path, clean: Path) -> None:
     def meta(**changes: object):
         def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
             edit_json(run / "pursuer" / "final.json", **changes)
+
         return setup
 
     def huge_graph(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
@@ -215,19 +268,28 @@ def hostile_records(out: Path, clean: Path) -> None:
 
         from pecli.runtime import file_sha256, sidecar_path
 
-        subprocess.run([sys.executable, "-m", "pecli", "export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2"],
-                       check=True, capture_output=True, cwd=zoo)
+        subprocess.run(
+            [sys.executable, "-m", "pecli", "export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2"],
+            check=True,
+            capture_output=True,
+            cwd=zoo,
+        )
         model = run / "pursuer" / "final.onnx"
         shape = numpy_helper.from_array(np.array([10**6, 10**6], np.int64), "shape")
-        graph = helper.make_graph([helper.make_node("ConstantOfShape", ["shape"], ["action"])], "g",
-                                  [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", 1, 1])],
-                                  [helper.make_tensor_value_info("action", TensorProto.FLOAT, None)], [shape])
+        graph = helper.make_graph(
+            [helper.make_node("ConstantOfShape", ["shape"], ["action"])],
+            "g",
+            [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["n", 1, 1])],
+            [helper.make_tensor_value_info("action", TensorProto.FLOAT, None)],
+            [shape],
+        )
         model.write_bytes(helper.make_model(graph).SerializeToString())
         edit_json(sidecar_path(model), model_sha256=file_sha256(model))
 
     def text(relative: str, body: str):
         def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
             (run / relative).write_text(body)
+
         return setup
 
     rows = [
@@ -243,20 +305,46 @@ def hostile_records(out: Path, clean: Path) -> None:
         case("run.json nested 100000 deep", text("run.json", deep), resume),
         case("state.json nested 100000 deep", text("pursuer/resume/state.json", deep), resume),
         case("config.yaml nested 20000 deep", text("config.yaml", "a: " + "[" * 20_000 + "]" * 20_000), resume),
-        case("export: ConstantOfShape [10^6, 10^6]", huge_graph,
-             ["play", "-p", "{run}/pursuer/final.onnx", "-e", "greedy", "-n", "4"]),
-        case("--set rounds of 5000 digits", lambda *a: None,
-             ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000, "--zoo", "{zoo}/new"]),
-        case("--zoo with markup z[/x]", lambda *a: None,
-             ["train", "pursuer", "-c", "quick", "--steps", "100", "--zoo", "{zoo}/z[/x]", "-q",
-              "--set", "n_envs=2", "--set", "learning_starts=50", "--set", "buffer_size=200"]),
+        case(
+            "export: ConstantOfShape [10^6, 10^6]",
+            huge_graph,
+            ["play", "-p", "{run}/pursuer/final.onnx", "-e", "greedy", "-n", "4"],
+        ),
+        case(
+            "--set rounds of 5000 digits",
+            lambda *a: None,
+            ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000, "--zoo", "{zoo}/new"],
+        ),
+        case(
+            "--zoo with markup z[/x]",
+            lambda *a: None,
+            [
+                "train",
+                "pursuer",
+                "-c",
+                "quick",
+                "--steps",
+                "100",
+                "--zoo",
+                "{zoo}/z[/x]",
+                "-q",
+                "--set",
+                "n_envs=2",
+                "--set",
+                "learning_starts=50",
+                "--set",
+                "buffer_size=200",
+            ],
+        ),
     ]
     counts = {kind: sum(row[1] == kind for row in rows) for kind in ("refused", "accepted", "internal", "payload")}
     print("\n| hostile record | outcome | line |\n| --- | --- | --- |")
     for row in rows:
         print("| " + " | ".join(row) + " |")
-    print("\n" + ", ".join(f"{kind}: {n}" for kind, n in counts.items()) + " (the markup --zoo is accepted: it is a "
-          "valid folder name, printed as text)")
+    print(
+        "\n" + ", ".join(f"{kind}: {n}" for kind, n in counts.items()) + " (the markup --zoo is accepted: it is a "
+        "valid folder name, printed as text)"
+    )
 
 
 if __name__ == "__main__":

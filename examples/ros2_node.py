@@ -72,14 +72,17 @@ class PecliDriver(Node):
         self.opponent: Odometry | None = None
 
         self.create_subscription(Odometry, self.declare_parameter("own_odom", "own/odom").value, self._on_own, 10)
-        self.create_subscription(Odometry, self.declare_parameter("opponent_odom", "opponent/odom").value,
-                                 self._on_opponent, 10)
+        self.create_subscription(
+            Odometry, self.declare_parameter("opponent_odom", "opponent/odom").value, self._on_opponent, 10
+        )
         self.create_subscription(Empty, self.declare_parameter("reset", "pecli/reset").value, self._on_reset, 10)
         self.drive = self.create_publisher(AckermannDriveStamped, self.declare_parameter("drive", "drive").value, 10)
         self.dt = self.controller.model.dt
         self.create_timer(self.dt, self.tick)  # one decision per tick, as in simulation (dt = 0.1 s: 10 Hz)
-        self.get_logger().info(f"{sidecar['role']} from {model}: {sidecar['belief']} belief, "
-                               f"{1.0 / self.dt:.0f} Hz, sensor {sidecar['sensor']['range_m']} m")
+        self.get_logger().info(
+            f"{sidecar['role']} from {model}: {sidecar['belief']} belief, "
+            f"{1.0 / self.dt:.0f} Hz, sensor {sidecar['sensor']['range_m']} m"
+        )
 
     @staticmethod
     def _opponent_params(sidecar: dict) -> dict:

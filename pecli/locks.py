@@ -76,8 +76,9 @@ def acquire(folder: str | Path, what: str) -> None:
         fd = os.open(key / LOCK_FILE, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as exc:
         if exc.errno == errno.ELOOP:
-            raise PecliError(f"{key / LOCK_FILE} is a symbolic link: pecli writes no lock through a link "
-                             "(delete it)") from None
+            raise PecliError(
+                f"{key / LOCK_FILE} is a symbolic link: pecli writes no lock through a link (delete it)"
+            ) from None
         raise
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
@@ -88,8 +89,9 @@ def acquire(folder: str | Path, what: str) -> None:
         os.close(fd)
         pid = holder(key)
         by = f"process {pid}" if pid is not None else "another process"
-        raise FolderLocked(f"{what} ({folder}) is being written by {by}: wait for it to end, or stop it "
-                           "(one writer at a time)") from None
+        raise FolderLocked(
+            f"{what} ({folder}) is being written by {by}: wait for it to end, or stop it (one writer at a time)"
+        ) from None
     except OSError:
         os.close(fd)
         raise

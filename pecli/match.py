@@ -79,11 +79,18 @@ class Recording:
         """The recording of the games ``index`` only (e.g. those the evader escaped, to draw them)."""
         index = np.asarray(index, dtype=int)
         return replace(
-            self, pursuer=self.pursuer[:, index], evader=self.evader[:, index],
-            seen_by_pursuer=self.seen_by_pursuer[:, index], seen_by_evader=self.seen_by_evader[:, index],
-            steps=self.steps[index], captured=self.captured[index],
-            beliefs={role: (weights[:, index], means[:, index], stds[:, index])
-                     for role, (weights, means, stds) in self.beliefs.items()})
+            self,
+            pursuer=self.pursuer[:, index],
+            evader=self.evader[:, index],
+            seen_by_pursuer=self.seen_by_pursuer[:, index],
+            seen_by_evader=self.seen_by_evader[:, index],
+            steps=self.steps[index],
+            captured=self.captured[index],
+            beliefs={
+                role: (weights[:, index], means[:, index], stds[:, index])
+                for role, (weights, means, stds) in self.beliefs.items()
+            },
+        )
 
 
 @dataclass(frozen=True)
@@ -111,10 +118,15 @@ class Behaviour:
         def mean(values: np.ndarray) -> float:
             return float(values.mean()) if values.size else float("nan")
 
-        return cls(caught=mean(recording.captured), seen=mean(recording.seen_by_pursuer[alive]),
-                   sees=mean(recording.seen_by_evader[alive]), speed_unseen=mean(speed[moved & ~sees]),
-                   speed_seeing=mean(speed[moved & sees]), distance=mean(np.linalg.norm(evader - pursuer, axis=2)[alive]),
-                   wall=mean(wall[alive]))
+        return cls(
+            caught=mean(recording.captured),
+            seen=mean(recording.seen_by_pursuer[alive]),
+            sees=mean(recording.seen_by_evader[alive]),
+            speed_unseen=mean(speed[moved & ~sees]),
+            speed_seeing=mean(speed[moved & sees]),
+            distance=mean(np.linalg.norm(evader - pursuer, axis=2)[alive]),
+            wall=mean(wall[alive]),
+        )
 
 
 def policy_seeds(seed: int) -> tuple[int, int]:

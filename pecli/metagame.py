@@ -47,8 +47,9 @@ class MetaGame:
 
     def support(self, role: str) -> dict[str, float]:
         """The members of ``role``'s equilibrium mixture with their weights, heaviest first."""
-        names, weights = ((self.pursuers, self.pursuer_mixture) if role == "pursuer"
-                          else (self.evaders, self.evader_mixture))
+        names, weights = (
+            (self.pursuers, self.pursuer_mixture) if role == "pursuer" else (self.evaders, self.evader_mixture)
+        )
         kept = {name: float(w) for name, w in zip(names, weights) if w > WEIGHT_FLOOR}
         return dict(sorted(kept.items(), key=lambda item: -item[1]))
 
@@ -75,8 +76,7 @@ def maximin(matrix: np.ndarray) -> tuple[np.ndarray, float]:
     upper = np.hstack([-m.T, np.ones((columns, 1))])  # v - (x M)_j <= 0
     equal = np.hstack([np.ones((1, rows)), np.zeros((1, 1))])
     bounds = [(0.0, None)] * rows + [(None, None)]
-    solution = linprog(cost, A_ub=upper, b_ub=np.zeros(columns), A_eq=equal, b_eq=[1.0], bounds=bounds,
-                       method="highs")
+    solution = linprog(cost, A_ub=upper, b_ub=np.zeros(columns), A_eq=equal, b_eq=[1.0], bounds=bounds, method="highs")
     if not solution.success:  # a bounded, feasible LP: only a solver fault lands here
         raise RuntimeError(f"the meta-game's linear program failed: {solution.message}")
     x = np.clip(solution.x[:rows], 0.0, None)

@@ -21,14 +21,70 @@ MAX_MODEL_BYTES = 256 << 20  # an export is kilobytes to a few megabytes
 MAX_ELEMENTS = 1 << 24  # elements of one constant, or of a tensor a constant shape asks for (64 MiB of float32)
 
 # every operator of pecli's exports, for each belief kind (and a margin of plain elementwise ones)
-ALLOWED_OPS = frozenset({
-    "Abs", "Add", "And", "Cast", "Clip", "Concat", "Constant", "ConstantOfShape", "Conv", "Cos", "CumSum", "Div",
-    "Elu", "Equal", "Exp", "Expand", "Flatten", "Floor", "Gather", "GatherElements", "Gemm", "Greater",
-    "GreaterOrEqual", "Identity", "LSTM", "Less", "LessOrEqual", "Log", "MatMul", "Max", "MaxPool", "Min", "Mul", "Neg",
-    "Not", "Or", "Pow", "Range", "Reciprocal", "ReduceMax", "ReduceMean", "ReduceMin", "ReduceSum", "Relu", "Reshape",
-    "Shape", "Sigmoid", "Sign", "Sin", "Slice", "Softmax", "Softplus", "Sqrt", "Squeeze", "Sub", "Tanh", "Tile",
-    "Transpose", "Unsqueeze", "Where",
-})
+ALLOWED_OPS = frozenset(
+    {
+        "Abs",
+        "Add",
+        "And",
+        "Cast",
+        "Clip",
+        "Concat",
+        "Constant",
+        "ConstantOfShape",
+        "Conv",
+        "Cos",
+        "CumSum",
+        "Div",
+        "Elu",
+        "Equal",
+        "Exp",
+        "Expand",
+        "Flatten",
+        "Floor",
+        "Gather",
+        "GatherElements",
+        "Gemm",
+        "Greater",
+        "GreaterOrEqual",
+        "Identity",
+        "LSTM",
+        "Less",
+        "LessOrEqual",
+        "Log",
+        "MatMul",
+        "Max",
+        "MaxPool",
+        "Min",
+        "Mul",
+        "Neg",
+        "Not",
+        "Or",
+        "Pow",
+        "Range",
+        "Reciprocal",
+        "ReduceMax",
+        "ReduceMean",
+        "ReduceMin",
+        "ReduceSum",
+        "Relu",
+        "Reshape",
+        "Shape",
+        "Sigmoid",
+        "Sign",
+        "Sin",
+        "Slice",
+        "Softmax",
+        "Softplus",
+        "Sqrt",
+        "Squeeze",
+        "Sub",
+        "Tanh",
+        "Tile",
+        "Transpose",
+        "Unsqueeze",
+        "Where",
+    }
+)
 # operators whose output size a constant input decides: (the input's index, what it holds)
 SIZED_BY = {"ConstantOfShape": (0, "shape"), "Expand": (1, "shape"), "Reshape": (1, "shape"), "Tile": (1, "repeats")}
 
@@ -62,7 +118,9 @@ def _fold(node: Any, values: list[Any]) -> Any:
     if op in ("Mul", "Add", "Sub", "Max", "Min") and len(values) == 2:
         with np.errstate(all="ignore"):
             a, b = (v.astype(np.float64) for v in values)
-            return {"Mul": np.multiply, "Add": np.add, "Sub": np.subtract, "Max": np.maximum, "Min": np.minimum}[op](a, b)
+            return {"Mul": np.multiply, "Add": np.add, "Sub": np.subtract, "Max": np.maximum, "Min": np.minimum}[op](
+                a, b
+            )
     return None
 
 
@@ -83,8 +141,10 @@ def check_graph(model: bytes, source: str = "model") -> None:
     graph = proto.graph
 
     def refuse(what: str) -> ExportError:
-        return ExportError(f"{source}: {what}, which no pecli export has: pecli loads graphs from elsewhere only "
-                           "with what its own exports hold")
+        return ExportError(
+            f"{source}: {what}, which no pecli export has: pecli loads graphs from elsewhere only "
+            "with what its own exports hold"
+        )
 
     if proto.functions or graph.sparse_initializer:
         raise refuse("functions or sparse constants")
@@ -101,14 +161,20 @@ def check_graph(model: bytes, source: str = "model") -> None:
         if node.op_type not in ALLOWED_OPS:
             raise refuse(f"the operator {node.op_type[:40]}")
         for attribute in node.attribute:
-            if attribute.type in (onnx.AttributeProto.SPARSE_TENSOR, onnx.AttributeProto.SPARSE_TENSORS,
-                                  onnx.AttributeProto.GRAPH, onnx.AttributeProto.GRAPHS):
+            if attribute.type in (
+                onnx.AttributeProto.SPARSE_TENSOR,
+                onnx.AttributeProto.SPARSE_TENSORS,
+                onnx.AttributeProto.GRAPH,
+                onnx.AttributeProto.GRAPHS,
+            ):
                 raise refuse("a sparse constant or a subgraph")
             tensors = [attribute.t] if attribute.type == onnx.AttributeProto.TENSOR else list(attribute.tensors)
             if any(t.data_location == onnx.TensorProto.EXTERNAL or t.external_data for t in tensors):
                 raise refuse("a constant stored in another file")
-            if any(_elements(t.dims) > MAX_ELEMENTS for t in tensors) or \
-                    max(len(attribute.ints), len(attribute.floats), len(attribute.strings)) > MAX_ELEMENTS:
+            if (
+                any(_elements(t.dims) > MAX_ELEMENTS for t in tensors)
+                or max(len(attribute.ints), len(attribute.floats), len(attribute.strings)) > MAX_ELEMENTS
+            ):
                 raise refuse("a constant larger than any export holds")
             if attribute.type == onnx.AttributeProto.INTS and any(abs(v) > MAX_DIM for v in attribute.ints):
                 raise refuse(f"{node.op_type} with {attribute.name} {list(attribute.ints)[:8]}")
@@ -148,6 +214,9 @@ def _check_size(node: Any, sized: tuple[int, str], value: Any, refuse: Any) -> N
     if value is None:
         return  # computed from the inputs at run time (bounded by the sidecar's sizes)
     values = value.reshape(-1)
-    if values.size > 64 or _elements(v for v in values if math.isfinite(float(v))) > MAX_ELEMENTS or \
-            not all(math.isfinite(float(v)) for v in values):
+    if (
+        values.size > 64
+        or _elements(v for v in values if math.isfinite(float(v))) > MAX_ELEMENTS
+        or not all(math.isfinite(float(v)) for v in values)
+    ):
         raise refuse(f"{node.op_type} of {sized[1]} {values[:8].tolist()}{'...' if values.size > 8 else ''}")

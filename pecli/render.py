@@ -74,8 +74,11 @@ def _body_patch(state: np.ndarray, role: str):
     if heading is None:
         return Circle((x, y), 0.2, color=COLOURS[role], zorder=5)
     c, s = math.cos(heading), math.sin(heading)
-    points = [(x + 0.45 * c, y + 0.45 * s), (x - 0.25 * c - 0.2 * s, y - 0.25 * s + 0.2 * c),
-              (x - 0.25 * c + 0.2 * s, y - 0.25 * s - 0.2 * c)]
+    points = [
+        (x + 0.45 * c, y + 0.45 * s),
+        (x - 0.25 * c - 0.2 * s, y - 0.25 * s + 0.2 * c),
+        (x - 0.25 * c + 0.2 * s, y - 0.25 * s - 0.2 * c),
+    ]
     return Polygon(points, closed=True, color=COLOURS[role], zorder=5)
 
 
@@ -91,8 +94,19 @@ def _draw_belief(ax: Axes, recording: Recording, role: str, episode: int, t: int
     for w, mu, sd in zip(weights, means, stds):
         centre = (mu[0] * hx, mu[1] * hy)
         for k, alpha in ((1, 0.35), (2, 0.15)):
-            ax.add_patch(Ellipse(centre, 2 * k * sd[0] * hx, 2 * k * sd[1] * hy, fill=False, ls=":",
-                                 lw=1.0, color=colour, alpha=max(0.1, alpha * (0.3 + 0.7 * float(w))), zorder=4))
+            ax.add_patch(
+                Ellipse(
+                    centre,
+                    2 * k * sd[0] * hx,
+                    2 * k * sd[1] * hy,
+                    fill=False,
+                    ls=":",
+                    lw=1.0,
+                    color=colour,
+                    alpha=max(0.1, alpha * (0.3 + 0.7 * float(w))),
+                    zorder=4,
+                )
+            )
         ax.plot(*centre, "+", color=colour, ms=5 + 6 * float(w), zorder=4)
 
 
@@ -165,8 +179,12 @@ def animate_episode(recording: Recording, path: str | Path, episode: int = 0, fp
             _draw_belief(ax, recording, role, episode, t)
         if t == end and recording.captured[episode]:
             ax.plot(*evader[t, :2], "kx", ms=12, mew=2, zorder=6)
-        ax.set_title(f"{recording.scenario.name}  t = {t * recording.scenario.dt:.1f} s   {_outcome(recording, episode)}"
-                     if t == end else f"{recording.scenario.name}  t = {t * recording.scenario.dt:.1f} s", fontsize=9)
+        ax.set_title(
+            f"{recording.scenario.name}  t = {t * recording.scenario.dt:.1f} s   {_outcome(recording, episode)}"
+            if t == end
+            else f"{recording.scenario.name}  t = {t * recording.scenario.dt:.1f} s",
+            fontsize=9,
+        )
 
     animation = FuncAnimation(fig, draw, frames=frames)
     with atomic_path(path) as tmp:

@@ -47,15 +47,29 @@ def results_table(results: TournamentResults) -> Table:
 def ratings_table(results: TournamentResults, limit: int | None = None) -> Table:
     """Players ranked by Bradley–Terry rating (Elo scale) with the mean capture rate of their pairings."""
     table = Table(title="ratings (Bradley–Terry, Elo scale; pursuers and evaders on one scale)")
-    for column, justify in (("#", "right"), ("player", "left"), ("role", "left"), ("rating", "right"),
-                            ("± se", "right"), ("capture rate", "right"), ("episodes", "right")):
+    for column, justify in (
+        ("#", "right"),
+        ("player", "left"),
+        ("role", "left"),
+        ("rating", "right"),
+        ("± se", "right"),
+        ("capture rate", "right"),
+        ("episodes", "right"),
+    ):
         table.add_column(column, justify=justify, overflow="fold")
     roles = {p.name: role for role, players in results.players.items() for p in players}
     for rank, rating in enumerate(results.ratings[:limit], start=1):
         own = [r for r in results.pairings if rating.name in (r.pursuer, r.evader)]
         captures = sum(r.captures for r in own) / max(1, sum(r.episodes for r in own))
-        table.add_row(str(rank), rating.name, roles[rating.name], f"{rating.elo:.0f}", f"{rating.stderr:.0f}",
-                      f"{captures:.3f}", str(rating.games))
+        table.add_row(
+            str(rank),
+            rating.name,
+            roles[rating.name],
+            f"{rating.elo:.0f}",
+            f"{rating.stderr:.0f}",
+            f"{captures:.3f}",
+            str(rating.games),
+        )
     return table
 
 
@@ -66,12 +80,31 @@ def write_reports(results: TournamentResults, out: Path) -> list[Path]:
     atomic_write_json(out / "results.json", data)
     with atomic_path(out / "results.csv") as tmp, tmp.open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["pursuer", "evader", "episodes", "captures", "capture_rate",
-                         "time_to_capture_mean", "time_to_capture_std", "best_in_row"])
+        writer.writerow(
+            [
+                "pursuer",
+                "evader",
+                "episodes",
+                "captures",
+                "capture_rate",
+                "time_to_capture_mean",
+                "time_to_capture_std",
+                "best_in_row",
+            ]
+        )
         for row in data["pairings"]:
-            writer.writerow([row["pursuer"], row["evader"], row["episodes"], row["captures"],
-                             f"{row['capture_rate']:.4f}", f"{row['time_to_capture_mean']:.4f}",
-                             f"{row['time_to_capture_std']:.4f}", row["best_in_row"]])
+            writer.writerow(
+                [
+                    row["pursuer"],
+                    row["evader"],
+                    row["episodes"],
+                    row["captures"],
+                    f"{row['capture_rate']:.4f}",
+                    f"{row['time_to_capture_mean']:.4f}",
+                    f"{row['time_to_capture_std']:.4f}",
+                    row["best_in_row"],
+                ]
+            )
     return [out / "results.json", out / "results.csv", heatmap(results, out / "capture_rates.png")]
 
 
@@ -83,9 +116,15 @@ def nash_record(results: TournamentResults, game: MetaGame) -> dict:
     def members(role: str) -> list[dict]:
         return [{"name": name, "spec": specs[name], "weight": weight} for name, weight in game.support(role).items()]
 
-    return {"kind": "nash", "scenario": results.scenario.name, "scenario_hash": results.scenario.fingerprint(),
-            "value": game.value, "pursuer": members("pursuer"), "evader": members("evader"),
-            "exploitability": game.exploitability()}
+    return {
+        "kind": "nash",
+        "scenario": results.scenario.name,
+        "scenario_hash": results.scenario.fingerprint(),
+        "value": game.value,
+        "pursuer": members("pursuer"),
+        "evader": members("evader"),
+        "exploitability": game.exploitability(),
+    }
 
 
 def write_nash(results: TournamentResults, game: MetaGame, out: Path) -> Path:
@@ -97,12 +136,18 @@ def write_nash(results: TournamentResults, game: MetaGame, out: Path) -> Path:
 
 def nash_table(game: MetaGame, limit: int | None = None) -> Table:
     """The equilibrium mixture of each side and every player's exploitability within the zoo, the least first."""
-    table = Table(title=f"the zoo's Nash equilibrium: value {game.value:.3f} (the capture rate each side's mixture "
-                        "guarantees)",
-                  caption="exploitability: how far the zoo's best reply to the player moves its capture rate past "
-                          "the value (0: the player is an equilibrium strategy)")
-    for column, justify in (("player", "left"), ("role", "left"), ("weight", "right"), ("exploitability", "right"),
-                            ("worst reply in the zoo", "left")):
+    table = Table(
+        title=f"the zoo's Nash equilibrium: value {game.value:.3f} (the capture rate each side's mixture guarantees)",
+        caption="exploitability: how far the zoo's best reply to the player moves its capture rate past "
+        "the value (0: the player is an equilibrium strategy)",
+    )
+    for column, justify in (
+        ("player", "left"),
+        ("role", "left"),
+        ("weight", "right"),
+        ("exploitability", "right"),
+        ("worst reply in the zoo", "left"),
+    ):
         table.add_column(column, justify=justify, overflow="fold")
     exploitability = game.exploitability()
     rows = []
@@ -144,8 +189,15 @@ def heatmap(results: TournamentResults, path: Path) -> Path:
     if len(pursuers) * len(evaders) <= 400:
         for (i, j), value in np.ndenumerate(rates):
             if not np.isnan(value):
-                ax.text(j, i, f"{value:.2f}", ha="center", va="center", fontsize=6,
-                        color="black" if value > 0.6 else "white")
+                ax.text(
+                    j,
+                    i,
+                    f"{value:.2f}",
+                    ha="center",
+                    va="center",
+                    fontsize=6,
+                    color="black" if value > 0.6 else "white",
+                )
     fig.colorbar(image, ax=ax, label="capture rate")
     ax.set_title(f"{results.scenario.name}: capture rate", fontsize=9)
     with atomic_path(path) as tmp:
@@ -198,8 +250,10 @@ def table_two(data: dict) -> Table:
         return sorted(names, key=lambda name: (not is_hj_spec(players[name].get("spec", "")), name))
 
     pursuers, evaders = ordered("pursuer"), ordered("evader")
-    hj_count = {role: sum(is_hj_spec(players[n].get("spec", "")) for n in names)
-                for role, names in (("pursuer", pursuers), ("evader", evaders))}
+    hj_count = {
+        role: sum(is_hj_spec(players[n].get("spec", "")) for n in names)
+        for role, names in (("pursuer", pursuers), ("evader", evaders))
+    }
 
     def label(name: str) -> str:
         if not is_hj_spec(players[name].get("spec", "")):

@@ -89,16 +89,28 @@ class ExportedModel:
             self.dt = float(control["dt_s"])
             self.frame_skip, self.frame_stack = int(control["frame_skip"]), int(control["frame_stack"])
             self.history_length, self.history_stride = int(control["history_length"]), int(control["history_stride"])
-            self.dim, self.own_dim, self.opponent_dim = int(layout["dim"]), int(layout["own_dim"]), int(layout["opponent_dim"])
+            self.dim, self.own_dim, self.opponent_dim = (
+                int(layout["dim"]),
+                int(layout["own_dim"]),
+                int(layout["opponent_dim"]),
+            )
             self.own_heading = bool(layout["own_heading"])
             self.draws = int(layout["draws"])
-            self.sensor_range, self.sensor_fov = float(sidecar["sensor"]["range_m"]), float(sidecar["sensor"]["fov_rad"])
+            self.sensor_range, self.sensor_fov = (
+                float(sidecar["sensor"]["range_m"]),
+                float(sidecar["sensor"]["fov_rad"]),
+            )
             self.limits = np.asarray(sidecar["command_limits"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as exc:
             raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
-        bounded = {"dt_s": (self.dt, 10.0), "frame_skip": (self.frame_skip, 1000), "frame_stack": (self.frame_stack, 1000),
-                   "history_length": (self.history_length, 10_000), "history_stride": (self.history_stride, 10_000),
-                   "dim": (self.dim, 10_000)}  # a scenario's own bounds: nothing an export can have is larger
+        bounded = {
+            "dt_s": (self.dt, 10.0),
+            "frame_skip": (self.frame_skip, 1000),
+            "frame_stack": (self.frame_stack, 1000),
+            "history_length": (self.history_length, 10_000),
+            "history_stride": (self.history_stride, 10_000),
+            "dim": (self.dim, 10_000),
+        }  # a scenario's own bounds: nothing an export can have is larger
         bad = [f"{key} = {value}" for key, (value, most) in bounded.items() if not 0 < value <= most]
         if not 0 <= self.draws <= 65_536:
             bad.append(f"draws = {self.draws}")
@@ -113,7 +125,9 @@ class ExportedModel:
             expected.update(uniform=[self.draws], normal=[self.draws, 2])
         found = {node.name: list(node.shape[1:]) for node in session.get_inputs()}
         if found != expected:
-            raise ExportError(f"the graph's inputs {found} do not match its sidecar's {expected} (shapes after the batch)")
+            raise ExportError(
+                f"the graph's inputs {found} do not match its sidecar's {expected} (shapes after the batch)"
+            )
         self.outputs = [node.name for node in session.get_outputs()]
 
     @classmethod
@@ -126,17 +140,23 @@ class ExportedModel:
             raise ExportError(f"{path}: {path.stat().st_size:,} bytes, more than an export ever is")
         sidecar = read_sidecar(path)
         if sidecar.get("model_sha256") != file_sha256(path):
-            raise ExportError(f"{path} does not match its sidecar {sidecar_path(path).name} (SHA-256 differs): "
-                              "the model was changed or damaged; export it again")
+            raise ExportError(
+                f"{path} does not match its sidecar {sidecar_path(path).name} (SHA-256 differs): "
+                "the model was changed or damaged; export it again"
+            )
         return cls.from_bytes(path.read_bytes(), sidecar, threads, source=str(path))
 
     @classmethod
-    def from_bytes(cls, model: bytes, sidecar: dict[str, Any], threads: int = 1, source: str = "model") -> ExportedModel:
+    def from_bytes(
+        cls, model: bytes, sidecar: dict[str, Any], threads: int = 1, source: str = "model"
+    ) -> ExportedModel:
         """A model from the graph's bytes (serialised ONNX) and its sidecar."""
         try:
             import onnxruntime as ort
         except ImportError:
-            raise ExportError("exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')") from None
+            raise ExportError(
+                "exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')"
+            ) from None
 
         check_graph(model, source)  # only an export's operators and sizes (with the onnx package)
         options = ort.SessionOptions()
@@ -225,8 +245,9 @@ class Controller:
         self.command = np.zeros(2)
         self.outputs: dict[str, np.ndarray] = {}
 
-    def row(self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None,
-            time: float | None = None) -> np.ndarray:
+    def row(
+        self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None, time: float | None = None
+    ) -> np.ndarray:
         """The SI row of this tick: own state, opponent state (zeros unless seen), seen flag, time (s).
 
         ``seen=None`` applies the player's sensor (range and field of view from the sidecar) to
@@ -250,8 +271,9 @@ class Controller:
         out[-1] = self.ticks * m.dt if time is None else float(time)
         return out
 
-    def step(self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None,
-             time: float | None = None) -> np.ndarray:
+    def step(
+        self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None, time: float | None = None
+    ) -> np.ndarray:
         """The command ``(2,)`` in SI units for this tick (see :meth:`row` for the arguments).
 
         A car's command is (steering velocity rad/s, acceleration m/s^2); a point mass's
@@ -270,9 +292,11 @@ class Controller:
             self.outputs = self._run()
             command = self.outputs["command"][0]
             if not np.isfinite(command).all():
-                raise ExportError(f"the model returned the command {command.tolist()} at tick {self.ticks}: "
-                                  "a NaN or infinite command is never sent to the motors (is the model damaged? "
-                                  "`pecli export check` tells)")
+                raise ExportError(
+                    f"the model returned the command {command.tolist()} at tick {self.ticks}: "
+                    "a NaN or infinite command is never sent to the motors (is the model damaged? "
+                    "`pecli export check` tells)"
+                )
             self.command = command.copy()
         self.ticks += 1
         return self.command.copy()

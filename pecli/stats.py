@@ -39,8 +39,10 @@ def mantel_haenszel_test(strata: Sequence[tuple[int, int, int, int]]) -> tuple[f
     excess = variance = 0.0
     for successes_a, n_a, successes_b, n_b in strata:
         if not (0 <= successes_a <= n_a and 0 <= successes_b <= n_b):
-            raise ValueError(f"a stratum needs 0 <= successes <= episodes on both sides, not {successes_a}/{n_a} "
-                             f"and {successes_b}/{n_b}")
+            raise ValueError(
+                f"a stratum needs 0 <= successes <= episodes on both sides, not {successes_a}/{n_a} "
+                f"and {successes_b}/{n_b}"
+            )
         n, successes = n_a + n_b, successes_a + successes_b
         if n_a < 1 or n_b < 1 or successes in (0, n):
             continue
@@ -51,8 +53,9 @@ def mantel_haenszel_test(strata: Sequence[tuple[int, int, int, int]]) -> tuple[f
     return excess, math.erfc(abs(excess) / math.sqrt(variance) / math.sqrt(2.0))
 
 
-def ties_with_best(successes: Sequence[int], trials: Sequence[int], higher_is_better: bool = True,
-                   alpha: float = 0.05) -> list[bool]:
+def ties_with_best(
+    successes: Sequence[int], trials: Sequence[int], higher_is_better: bool = True, alpha: float = 0.05
+) -> list[bool]:
     """For one row of the paper's table: which entries are the best or statistically tie with it (p > alpha)."""
     rates = [s / n for s, n in zip(successes, trials)]
     best = int(np.argmax(rates) if higher_is_better else np.argmin(rates))
@@ -139,13 +142,16 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
     return float(interval.low), float(interval.high)
 
 
-def difference_interval(successes_a: int, n_a: int, successes_b: int, n_b: int,
-                        confidence: float = 0.95) -> tuple[float, float]:
+def difference_interval(
+    successes_a: int, n_a: int, successes_b: int, n_b: int, confidence: float = 0.95
+) -> tuple[float, float]:
     """An interval for the difference of two independent capture rates ``a - b`` (Newcombe's hybrid score
     interval, built from each rate's Wilson interval; it stays within [-1, 1] and behaves near 0 and 1)."""
     p_a, p_b = successes_a / n_a, successes_b / n_b
     low_a, high_a = wilson_interval(successes_a, n_a, confidence)
     low_b, high_b = wilson_interval(successes_b, n_b, confidence)
     d = p_a - p_b
-    return (d - math.sqrt((p_a - low_a) ** 2 + (high_b - p_b) ** 2),
-            d + math.sqrt((high_a - p_a) ** 2 + (p_b - low_b) ** 2))
+    return (
+        d - math.sqrt((p_a - low_a) ** 2 + (high_b - p_b) ** 2),
+        d + math.sqrt((high_a - p_a) ** 2 + (p_b - low_b) ** 2),
+    )

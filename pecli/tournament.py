@@ -123,7 +123,11 @@ def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Play
     try:
         sidecar = read_sidecar(path)
         role, exported_for = sidecar["role"], sidecar["scenario"]
-        run, fingerprint, model_hash = sidecar["checkpoint"].get("run"), exported_for["fingerprint"], sidecar["model_sha256"]
+        run, fingerprint, model_hash = (
+            sidecar["checkpoint"].get("run"),
+            exported_for["fingerprint"],
+            sidecar["model_sha256"],
+        )
     except PecliError as exc:
         skipped.append(str(exc))
         return None
@@ -161,8 +165,8 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
     and policy families such as ``hj`` (which join both sides when they play both roles).
 
     A folder contributes every checkpoint with metadata below it, except ``last`` and a run's durable
-    state (``resume/``), copies of checkpoints; exported models (``.onnx``) join only when named. Checkpoints of another scenario,
-    and files without metadata, are skipped and listed.
+    state (``resume/``), copies of checkpoints; exported models (``.onnx``) join only when named.
+    Checkpoints of another scenario, and files without metadata, are skipped and listed.
     """
     players: dict[Role, list[Player]] = {role: [] for role in ROLES}
     skipped: list[str] = []
@@ -222,8 +226,9 @@ def check_saved_players(entry: str, scenario: Scenario) -> None:
             if not isinstance(meta, str):
                 return
             problems.append(meta)
-        raise PecliError(f"no checkpoint of scenario '{scenario.name}' under {entry} "
-                         f"({len(problems)} skipped, e.g. {problems[0]})")
+        raise PecliError(
+            f"no checkpoint of scenario '{scenario.name}' under {entry} ({len(problems)} skipped, e.g. {problems[0]})"
+        )
     if path.suffix.lower() in (".zip", ".onnx"):
         _entry_players(entry, scenario, [])  # one file: PecliError with the reason it cannot play
 
@@ -265,7 +270,9 @@ def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
     return players
 
 
-def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed: int = 0) -> list[tuple[Player, Player]]:
+def schedule(
+    players: dict[Role, list[Player]], sample: int | None = None, seed: int = 0
+) -> list[tuple[Player, Player]]:
     """Pairings ``(pursuer, evader)``: the full grid, or each checkpoint against ``sample`` random opponents.
 
     With ``sample`` (the paper's ranking, 32 there) every learned player meets ``sample`` players of
@@ -293,11 +300,15 @@ def schedule(players: dict[Role, list[Player]], sample: int | None = None, seed:
 
 def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> str:
     """Cache key of a pairing: everything that decides its outcome."""
-    text = json.dumps([__version__, CACHE_SCHEMA, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)])
+    text = json.dumps(
+        [__version__, CACHE_SCHEMA, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)]
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
-def play_pairing(scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]) -> PairingResult:
+def play_pairing(
+    scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]
+) -> PairingResult:
     """Play ``episodes`` batched games per seed; both policies act on the whole batch."""
     import numpy as np
 
@@ -330,10 +341,15 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     except (PecliError, TypeError):
         return None
     numbers = (result.episodes, result.captures, result.time_to_capture_mean, result.time_to_capture_std)
-    if not all(finite_number(x) for x in numbers) \
-            or not isinstance(result.episodes, int) or not isinstance(result.captures, int) \
-            or not 0 <= result.captures <= result.episodes or result.episodes < 1 \
-            or not 0 <= result.time_to_capture_mean <= 1 or not 0 <= result.time_to_capture_std <= 1:
+    if (
+        not all(finite_number(x) for x in numbers)
+        or not isinstance(result.episodes, int)
+        or not isinstance(result.captures, int)
+        or not 0 <= result.captures <= result.episodes
+        or result.episodes < 1
+        or not 0 <= result.time_to_capture_mean <= 1
+        or not 0 <= result.time_to_capture_std <= 1
+    ):
         return None  # not what a pairing can give: played again
     return result
 
@@ -376,8 +392,9 @@ def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     the ``with`` block (Ctrl-C, SIGTERM turned into ``KeyboardInterrupt``, an error) stops the workers
     at once instead of waiting for their pairings; a normal exit waits for them.
     """
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init,
-                               initargs=(os.getpid(),))
+    pool = ProcessPoolExecutor(
+        max_workers=workers, mp_context=get_context("spawn"), initializer=_worker_init, initargs=(os.getpid(),)
+    )
     try:
         yield pool
     except BaseException:
@@ -461,8 +478,10 @@ class TournamentResults:
         evaders = [e.name for e in self.players["evader"]]
         missing = [(p, e) for p in pursuers for e in evaders if (p, e) not in grid]
         if missing:
-            raise PecliError(f"the Nash equilibrium needs every pairing; {len(missing)} were not played "
-                             f"(e.g. {missing[0][0]} vs {missing[0][1]}): leave out --sample")
+            raise PecliError(
+                f"the Nash equilibrium needs every pairing; {len(missing)} were not played "
+                f"(e.g. {missing[0][0]} vs {missing[0][1]}): leave out --sample"
+            )
         matrix = np.array([[grid[p, e].capture_rate for e in evaders] for p in pursuers])
         return solve(pursuers, evaders, matrix)
 
@@ -552,6 +571,10 @@ def run_tournament(
             raise PecliError(f"{failures[0]}{more}; the pairings that finished are cached for --resume")
         ordered = [results[pairing_key(scenario, p, e, episodes, seeds)] for p, e in pairings]
         return TournamentResults(
-            scenario=scenario, players=players, pairings=ordered, ratings=rate(players, ordered),
-            episodes=episodes, seeds=list(seeds),
+            scenario=scenario,
+            players=players,
+            pairings=ordered,
+            ratings=rate(players, ordered),
+            episodes=episodes,
+            seeds=list(seeds),
         )

@@ -28,8 +28,10 @@ def trusted() -> bool:
         return True
     if value in NO:
         return False
-    raise PecliError(f"{TRUST_VARIABLE}={os.environ[TRUST_VARIABLE]!r}: set it to 1, true or yes to trust files "
-                     "that need unpickling, or leave it unset (0, false or no)")
+    raise PecliError(
+        f"{TRUST_VARIABLE}={os.environ[TRUST_VARIABLE]!r}: set it to 1, true or yes to trust files "
+        "that need unpickling, or leave it unset (0, false or no)"
+    )
 
 
 class UntrustedFileError(PecliError):
@@ -38,5 +40,7 @@ class UntrustedFileError(PecliError):
 
 def untrusted(path: str | Path, why: str) -> UntrustedFileError:
     """The one-line refusal of ``path``, which only unpickling can read because ``why``."""
-    return UntrustedFileError(f"{path}: {why}; unpickling runs any code its author put in it, so pecli refuses. If you "
-                              f"trust where it came from, pass `pecli --trust ...` (or set {TRUST_VARIABLE}=1)")
+    return UntrustedFileError(
+        f"{path}: {why}; unpickling runs any code its author put in it, so pecli refuses. If you "
+        f"trust where it came from, pass `pecli --trust ...` (or set {TRUST_VARIABLE}=1)"
+    )

@@ -82,7 +82,9 @@ class CheckpointMeta:
     round: int | None = None  # self-play: the round that produced it
     parent: str = ""  # self-play: the learner's checkpoint this round started from (run-relative)
     opponents: list[dict[str, Any]] = field(default_factory=list)  # self-play: the pool it trained against
-    policy_kwargs: dict[str, Any] = field(default_factory=dict)  # pecli.models.algorithms.policy_kwargs: rebuilds the network
+    policy_kwargs: dict[str, Any] = field(
+        default_factory=dict
+    )  # pecli.models.algorithms.policy_kwargs: rebuilds the network
     belief_kwargs: dict[str, Any] | None = None  # the actor's BeliefModel arguments, with a belief
     averaged: list[str] = field(default_factory=list)  # pecli zoo average: the checkpoints it is the mean of
     pecli_version: str = __version__
@@ -92,9 +94,14 @@ class CheckpointMeta:
         """Refuse values that cannot describe a checkpoint (a hand-edited or damaged file): ``ValueError``."""
         if self.role not in ("pursuer", "evader"):
             raise ValueError(f"role must be pursuer or evader, not {self.role!r}")
-        for name, least, most in (("steps", 0, MAX_STEPS), ("episodes", 0, MAX_STEPS), ("frame_skip", 1, 1000),
-                                  ("frame_stack", 1, 1000), ("history_length", 1, MAX_HISTORY),
-                                  ("history_stride", 1, MAX_HISTORY)):  # the scenario's own bounds
+        for name, least, most in (
+            ("steps", 0, MAX_STEPS),
+            ("episodes", 0, MAX_STEPS),
+            ("frame_skip", 1, 1000),
+            ("frame_stack", 1, 1000),
+            ("history_length", 1, MAX_HISTORY),
+            ("history_stride", 1, MAX_HISTORY),
+        ):  # the scenario's own bounds
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:
                 raise ValueError(f"{name} must be a whole number from {least} to {most}, not {value!r}")
@@ -190,8 +197,10 @@ def check_run_name(name: str) -> str:
     """``name`` if it is one folder name of letters, digits, ``-``, ``_`` and ``.`` (not starting with
     ``.``, at most 128 characters); else :class:`ZooError`: a run stays inside its zoo."""
     if not isinstance(name, str) or not _RUN_NAME.fullmatch(name):
-        raise ZooError(f"run name {name!r} is not allowed: use one folder name of letters, digits, '-', '_' "
-                       "and '.' (not starting with '.', at most 128 characters)")
+        raise ZooError(
+            f"run name {name!r} is not allowed: use one folder name of letters, digits, '-', '_' "
+            "and '.' (not starting with '.', at most 128 characters)"
+        )
     return name
 
 
@@ -336,7 +345,9 @@ class Run:
             JobRecord.model_validate(data)
         except ValidationError as exc:
             first = exc.errors()[0]
-            raise ZooError(f"{path}: damaged ({'.'.join(map(str, first['loc'])) or 'record'}: {first['msg']})") from None
+            raise ZooError(
+                f"{path}: damaged ({'.'.join(map(str, first['loc'])) or 'record'}: {first['msg']})"
+            ) from None
         return data
 
 
@@ -394,8 +405,12 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
             continue
         found = {}
         for rating in ratings:
-            if not isinstance(rating, dict) or not isinstance(rating.get("spec"), str) or not rating["spec"] \
-                    or not all(finite_number(rating.get(key)) for key in ("elo", "stderr")):
+            if (
+                not isinstance(rating, dict)
+                or not isinstance(rating.get("spec"), str)
+                or not rating["spec"]
+                or not all(finite_number(rating.get(key)) for key in ("elo", "stderr"))
+            ):
                 continue  # not what a tournament writes: a rating of NaN never ranks a checkpoint
             spec = Path(rating["spec"])
             if spec.suffix == ".zip":

@@ -48,9 +48,12 @@ def keep_torch_threads():
 
 def hold(folder: Path, code: str = "from pecli.locks import acquire; acquire({folder!r}, 'x')") -> subprocess.Popen:
     """A process that takes ``folder``'s lock (exit code 3 if refused), says so, and sleeps."""
-    script = ("import sys, time\nfrom pecli.locks import FolderLocked\ntry:\n    "
-              + code.format(folder=str(folder)) + "\nexcept FolderLocked:\n    sys.exit(3)\n"
-              "print('locked', flush=True)\ntime.sleep(120)\n")
+    script = (
+        "import sys, time\nfrom pecli.locks import FolderLocked\ntry:\n    "
+        + code.format(folder=str(folder))
+        + "\nexcept FolderLocked:\n    sys.exit(3)\n"
+        "print('locked', flush=True)\ntime.sleep(120)\n"
+    )
     process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     line = process.stdout.readline().strip()
     if line != "locked":

@@ -45,7 +45,9 @@ def checkpoints(tmp_path_factory, quick: Scenario) -> dict[str, tuple[Path, obje
         env = make_env(job, resolve_policy("greedy", "evader", scenario), seed=0)
         model = make_model(job, env, tensorboard=None)
         model.learn(120)  # 50 transitions of warm-up, then updates (CrossQ's batch statistics move)
-        path = Run.create(zoo, algo, scenario, {"command": "test"}).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
+        path = Run.create(zoo, algo, scenario, {"command": "test"}).save(
+            model, "pursuer", "final", checkpoint_meta(job, model, 0)
+        )
         made[algo] = (path, model, env)
     return made
 
@@ -71,8 +73,9 @@ def test_a_policy_rebuilds_from_its_recorded_kwargs_and_state_dict(checkpoints, 
 
 
 @pytest.mark.parametrize("algo", ALGOS)
-def test_a_checkpoint_plays_its_deterministic_action_and_exports_with_parity(checkpoints, quick: Scenario,
-                                                                            algo: str) -> None:
+def test_a_checkpoint_plays_its_deterministic_action_and_exports_with_parity(
+    checkpoints, quick: Scenario, algo: str
+) -> None:
     path, model, env = checkpoints[algo]
     scenario = with_overrides(quick, {**TINY, "algo": algo})
     learned = LearnedPolicy.load(path, "pursuer", scenario)
@@ -105,9 +108,29 @@ def test_crossq_concatenates_dict_observations() -> None:
 
 def test_train_with_algo_then_play_on_the_cli(tmp_path: Path) -> None:
     sets = sum((["--set", f"{key}={value}"] for key, value in TINY.items() if key != "net_arch"), [])
-    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--algo", "sac", "--steps", "200", "--zoo",
-                                 str(tmp_path), "--name", "sac", "-q", "--device", "auto", *sets,
-                                 "--set", "net_arch=[16, 16]"])
+    result = runner.invoke(
+        app,
+        [
+            "train",
+            "pursuer",
+            "-c",
+            "quick",
+            "--algo",
+            "sac",
+            "--steps",
+            "200",
+            "--zoo",
+            str(tmp_path),
+            "--name",
+            "sac",
+            "-q",
+            "--device",
+            "auto",
+            *sets,
+            "--set",
+            "net_arch=[16, 16]",
+        ],
+    )
     assert result.exit_code == 0, result.output
     checkpoint = tmp_path / "sac" / "pursuer" / "final.zip"
     assert read_metadata(checkpoint).algo == "sac"
@@ -124,8 +147,9 @@ def test_an_unknown_algorithm_is_refused_in_one_line(tmp_path: Path) -> None:
 @pytest.mark.skipif(th.cuda.is_available(), reason="this machine has CUDA")
 @pytest.mark.parametrize("command", [["train", "pursuer"], ["selfplay"], ["tune", "pursuer"]])
 def test_device_cuda_without_cuda_is_one_clear_line(tmp_path: Path, command: list[str]) -> None:
-    result = runner.invoke(app, [*command, "-c", "quick", "--device", "cuda", "--zoo" if command[0] != "tune" else
-                                 "--dir", str(tmp_path)])
+    result = runner.invoke(
+        app, [*command, "-c", "quick", "--device", "cuda", "--zoo" if command[0] != "tune" else "--dir", str(tmp_path)]
+    )
     assert result.exit_code == 1
     assert result.output.strip().count("\n") == 0 and "no CUDA device" in result.output
     assert not any(tmp_path.iterdir())  # refused before anything was written

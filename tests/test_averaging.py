@@ -23,9 +23,21 @@ def test_the_mean_state_averages_weights_and_keeps_the_newest_counters() -> None
 
 def test_one_network_ignores_the_training_settings_a_belief_carries() -> None:
     scenario = {"name": "tuned", "training": {"selfplay": {"league_floor": 0.3}}}
-    meta = CheckpointMeta(role="pursuer", steps=1, episodes=1, algo="td3", belief="bimdn", scenario="tuned",
-                          scenario_hash="h", opponent="selfplay", frame_skip=2, frame_stack=4, history_length=200,
-                          history_stride=10, belief_kwargs={"hidden": 128, "scenario": scenario})
+    meta = CheckpointMeta(
+        role="pursuer",
+        steps=1,
+        episodes=1,
+        algo="td3",
+        belief="bimdn",
+        scenario="tuned",
+        scenario_hash="h",
+        opponent="selfplay",
+        frame_skip=2,
+        frame_stack=4,
+        history_length=200,
+        history_stride=10,
+        belief_kwargs={"hidden": 128, "scenario": scenario},
+    )
     later = replace(meta, belief_kwargs={"hidden": 128, "scenario": {**scenario, "training": {"selfplay": {}}}})
     assert all(_network(meta, name) == _network(later, name) for name in SAME_NETWORK)  # a setting pecli added
     wider = replace(meta, belief_kwargs={"hidden": 64, "scenario": scenario})

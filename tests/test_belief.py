@@ -106,8 +106,14 @@ def test_bimdn_learns_on_a_small_data_set(quick: Scenario) -> None:
 def test_batch_ukf_equals_filterpy() -> None:
     rng = np.random.default_rng(0)
     f = transition(1.0)
-    reference = UnscentedKalmanFilter(4, 2, 1.0, hx=lambda s: s[:2], fx=lambda s, dt: f @ s,
-                                      points=MerweScaledSigmaPoints(4, alpha=0.1, beta=2.0, kappa=1.0))
+    reference = UnscentedKalmanFilter(
+        4,
+        2,
+        1.0,
+        hx=lambda s: s[:2],
+        fx=lambda s, dt: f @ s,
+        points=MerweScaledSigmaPoints(4, alpha=0.1, beta=2.0, kappa=1.0),
+    )
     reference.x, reference.P = np.zeros(4), 0.1 * np.eye(4)
     reference.Q, reference.R = 0.1 * np.eye(4), 0.1 * np.eye(2)
     ours = BatchUKF(batch=3, dt=1.0)
@@ -150,9 +156,20 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
     from pecli.policies import resolve_policy
     from pecli.rl.train import TrainJob, train, with_overrides
 
-    scenario = with_overrides(quick, {"belief": "bimdn", "steps": 600, "learning_starts": 100, "batch_size": 32,
-                                      "buffer_size": 1000, "n_envs": 4, "belief_settings.warmup": 100,
-                                      "belief_settings.batch_size": 32, "belief_settings.hidden": 16})
+    scenario = with_overrides(
+        quick,
+        {
+            "belief": "bimdn",
+            "steps": 600,
+            "learning_starts": 100,
+            "batch_size": 32,
+            "buffer_size": 1000,
+            "n_envs": 4,
+            "belief_settings.warmup": 100,
+            "belief_settings.batch_size": 32,
+            "belief_settings.hidden": 16,
+        },
+    )
     job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=tmp_path, name="b", progress=False)
     final = train(job)
     policy = resolve_policy(str(final), "pursuer", scenario)
@@ -181,8 +198,14 @@ def test_a_belief_policy_trains_saves_and_plays(quick: Scenario, tmp_path: Path)
     from stable_baselines3 import TD3
 
     kwargs = TD3.load(final, device="cpu").policy_kwargs
-    old = {**kwargs, "features_extractor_kwargs": {"belief": {
-        key: value for key, value in kwargs["features_extractor_kwargs"]["belief"].items() if key != "frame"}}}
+    old = {
+        **kwargs,
+        "features_extractor_kwargs": {
+            "belief": {
+                key: value for key, value in kwargs["features_extractor_kwargs"]["belief"].items() if key != "frame"
+            }
+        },
+    }
     loaded = TD3.load(final, custom_objects={"policy_kwargs": old}, device="cpu")
     belief = loaded.policy.actor.features_extractor.belief
     assert belief.frame.frame == "world"
@@ -202,7 +225,7 @@ def test_own_frame_belief_reads_like_the_seen_opponent(role: str, config: str) -
     seen = obs[:, codec.seen_index] > 0
     assert seen.sum() > 50
     kp = game.dynamics["pursuer"].state_dim
-    truth = game.normalised_state()[:, kp:kp + 2] if role == "pursuer" else game.normalised_state()[:, 0:2]
+    truth = game.normalised_state()[:, kp : kp + 2] if role == "pursuer" else game.normalised_state()[:, 0:2]
     frame = BeliefFrame(codec, "own")
     points = frame(th.as_tensor(truth), th.as_tensor(obs)).numpy()
     block = obs[:, codec.opp_slice][:, :2]

@@ -13,7 +13,8 @@ from pecli.rl.budget import budget_reached, cpu_through, scheduled_turns, whole_
 
 LEAGUE = load_experiment("strength-small").runs()[0]  # no exploiters, 150 rounds planned
 EXPLOITERS = LEAGUE.scenario.training.selfplay.model_copy(  # an evader exploiter every round once 1 CPU-h is spent
-    update={"league_exploiter_every": 1, "league_exploiter_after": 1.0, "league_exploiter_roles": ["evader"]})
+    update={"league_exploiter_every": 1, "league_exploiter_after": 1.0, "league_exploiter_roles": ["evader"]}
+)
 
 
 def turn(round: int, role: str, cpu: float, learner: str = "main") -> dict:
@@ -23,15 +24,18 @@ def turn(round: int, role: str, cpu: float, learner: str = "main") -> dict:
 WHOLE = [turn(1, "pursuer", 1000), turn(1, "evader", 1000), turn(2, "pursuer", 1000), turn(2, "evader", 1000)]
 
 
-@pytest.mark.parametrize(("turns", "rounds", "spent", "reached"), [
-    ([], 0, 0, False),
-    (WHOLE, 2, 4000, True),  # 4000 CPU-s after round 2, over a budget of one hour
-    (WHOLE[:3], 1, 2000, False),  # round 2 half-played: its pursuer's 1000 s do not end the run
-    (WHOLE[:2] + [turn(2, "pursuer", 2000)], 1, 2000, False),  # not even when they pass the budget
-    (WHOLE[:2] + [turn(1, "evader", 2000, "exploiter")], 1, 4000, True),  # an exploiter's turn counts
-    ([turn(1, "pursuer", 1000), turn(1, "evader", 9000, "exploiter")], 0, 0, False),  # but is no main turn
-    ([turn(2, "pursuer", 9000), turn(2, "evader", 9000)], 0, 0, False),  # rounds count from round 1
-])
+@pytest.mark.parametrize(
+    ("turns", "rounds", "spent", "reached"),
+    [
+        ([], 0, 0, False),
+        (WHOLE, 2, 4000, True),  # 4000 CPU-s after round 2, over a budget of one hour
+        (WHOLE[:3], 1, 2000, False),  # round 2 half-played: its pursuer's 1000 s do not end the run
+        (WHOLE[:2] + [turn(2, "pursuer", 2000)], 1, 2000, False),  # not even when they pass the budget
+        (WHOLE[:2] + [turn(1, "evader", 2000, "exploiter")], 1, 4000, True),  # an exploiter's turn counts
+        ([turn(1, "pursuer", 1000), turn(1, "evader", 9000, "exploiter")], 0, 0, False),  # but is no main turn
+        ([turn(2, "pursuer", 9000), turn(2, "evader", 9000)], 0, 0, False),  # rounds count from round 1
+    ],
+)
 def test_only_whole_rounds_count(turns: list[dict], rounds: int, spent: float, reached: bool, tmp_path: Path) -> None:
     settings = LEAGUE.scenario.training.selfplay
     assert whole_rounds(turns, settings) == rounds and cpu_through(turns, rounds) == spent

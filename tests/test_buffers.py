@@ -1,4 +1,5 @@
-"""n-step returns for Dict observations: sums, discounts, episode ends, the ring's newest row, abandoned games, training."""
+"""n-step returns for Dict observations: sums, discounts, episode ends, the ring's newest row,
+abandoned games, training."""
 
 from __future__ import annotations
 
@@ -18,15 +19,27 @@ SPACE = spaces.Dict({"obs": spaces.Box(-np.inf, np.inf, (1,), np.float32)})
 ACTIONS = spaces.Box(-1, 1, (2,), np.float32)
 
 
-def filled(n_step: int, rows: int, size: int = 16, done: set[int] = frozenset(), timeout: set[int] = frozenset(),
-           buffer_class: type = NStepDictReplayBuffer) -> DictReplayBuffer:
+def filled(
+    n_step: int,
+    rows: int,
+    size: int = 16,
+    done: set[int] = frozenset(),
+    timeout: set[int] = frozenset(),
+    buffer_class: type = NStepDictReplayBuffer,
+) -> DictReplayBuffer:
     """A one-env buffer whose row ``t`` has observation ``t``, next observation ``t + 0.5`` and reward ``t + 1``."""
     kwargs = {"n_step": n_step, "gamma": GAMMA} if buffer_class is NStepDictReplayBuffer else {}
     buffer = buffer_class(size, SPACE, ACTIONS, device="cpu", n_envs=1, **kwargs)
     for t in range(rows):
         infos = [{"TimeLimit.truncated": t in timeout}]
-        buffer.add({"obs": np.array([[t]], np.float32)}, {"obs": np.array([[t + 0.5]], np.float32)},
-                   np.zeros((1, 2), np.float32), np.array([t + 1.0]), np.array([t in done or t in timeout]), infos)
+        buffer.add(
+            {"obs": np.array([[t]], np.float32)},
+            {"obs": np.array([[t + 0.5]], np.float32)},
+            np.zeros((1, 2), np.float32),
+            np.array([t + 1.0]),
+            np.array([t in done or t in timeout]),
+            infos,
+        )
     return buffer
 
 
@@ -80,8 +93,14 @@ def test_one_step_samples_exactly_as_sb3s_dict_buffer() -> None:
 def test_abandoned_games_end_returns_and_one_step_samples_do_not_change() -> None:
     buffer = filled(3, rows=5)
     end_episodes(buffer)  # a new turn: the games of row 4 are gone
-    buffer.add({"obs": np.array([[9.0]], np.float32)}, {"obs": np.array([[9.5]], np.float32)},
-               np.zeros((1, 2), np.float32), np.array([10.0]), np.array([False]), [{}])
+    buffer.add(
+        {"obs": np.array([[9.0]], np.float32)},
+        {"obs": np.array([[9.5]], np.float32)},
+        np.zeros((1, 2), np.float32),
+        np.array([10.0]),
+        np.array([False]),
+        [{}],
+    )
     s = sample(buffer, 3)
     assert s.rewards.item() == pytest.approx(4 + GAMMA * 5) and s.discounts.item() == pytest.approx(GAMMA**2)
     assert s.next_observations["obs"].item() == pytest.approx(4.5) and s.dones.item() == 0  # bootstraps
@@ -95,8 +114,14 @@ def test_a_row_marked_after_a_save_is_saved_again_with_the_next_rows(tmp_path) -
     buffer = filled(3, rows=4)
     ring = write_chunk(tmp_path, "replay", replay_arrays(buffer), Ring(buffer.buffer_size), 4)
     end_episodes(buffer)  # row 3, already on disk unmarked
-    buffer.add({"obs": np.array([[4.0]], np.float32)}, {"obs": np.array([[4.5]], np.float32)},
-               np.zeros((1, 2), np.float32), np.array([5.0]), np.array([False]), [{}])
+    buffer.add(
+        {"obs": np.array([[4.0]], np.float32)},
+        {"obs": np.array([[4.5]], np.float32)},
+        np.zeros((1, 2), np.float32),
+        np.array([5.0]),
+        np.array([False]),
+        [{}],
+    )
     ring = write_chunk(tmp_path, "replay", replay_arrays(buffer), ring, 5)
     restored = filled(3, rows=0)
     _read_chunks(tmp_path, ring, replay_arrays(restored))

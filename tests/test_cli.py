@@ -168,11 +168,14 @@ def test_help_paragraphs_wrap_at_the_terminal_not_where_the_source_wrapped() -> 
     """Typer's rich help keeps a docstring's line breaks: every command's text is reflowed into paragraphs."""
     from pecli.cli.app import reflow
 
-    assert reflow("""One line.
+    assert (
+        reflow("""One line.
 
         A paragraph wrapped
         in the source.
-        """) == "One line.\n\nA paragraph wrapped in the source."
+        """)
+        == "One line.\n\nA paragraph wrapped in the source."
+    )
     assert reflow("Title.\n\n\b\nkept\nas is") == "Title.\n\n\b\nkept\nas is"
     groups = [group.typer_instance for group in app.registered_groups]
     commands = [*app.registered_commands, *(command for group in groups for command in group.registered_commands)]
@@ -187,8 +190,10 @@ def test_python_dash_m_and_console_script() -> None:
     assert result.returncode == 0 and result.stdout.strip() == f"pecli {__version__}"
 
 
-@pytest.mark.parametrize("args, message", [(["train", "pursuerr"], "'pursuerr' is not one of"),
-                                           (["play", "--nope"], "No such option: --nope")])
+@pytest.mark.parametrize(
+    "args, message",
+    [(["train", "pursuerr"], "'pursuerr' is not one of"), (["play", "--nope"], "No such option: --nope")],
+)
 def test_a_usage_error_is_one_line(args: list[str], message: str) -> None:
     result = invoke(*args)
     lines = result.output.strip().splitlines()

@@ -18,8 +18,17 @@ RUNS = ["none-league-s0", "none-league-s1", "none-alternating-s0", "none-alterna
 
 
 def turn(r: int, role: str, checkpoint: str, cpu_seconds: float, **more: object) -> dict:
-    return {"round": r, "role": role, "steps": 100 * r, "episodes": 10, "captures": 5, "cpu_seconds": cpu_seconds,
-            "checkpoint": checkpoint, "opponents": 3, **more}
+    return {
+        "round": r,
+        "role": role,
+        "steps": 100 * r,
+        "episodes": 10,
+        "captures": 5,
+        "cpu_seconds": cpu_seconds,
+        "checkpoint": checkpoint,
+        "opponents": 3,
+        **more,
+    }
 
 
 def fake_run(zoo: Path, name: str, cpu_per_round: float, rounds: int) -> Path:
@@ -60,8 +69,13 @@ def test_each_run_is_taken_at_an_equal_budget(tmp_path: Path) -> None:
 
 
 def test_groups_are_compared_over_the_evaders_all_their_pursuers_met() -> None:
-    rate = {"none-league-s0": 90, "none-league-s1": 88, "none-alternating-s0": 60, "none-alternating-s1": 62,
-            "none-simultaneous-s0": 70}  # against other runs' evaders
+    rate = {
+        "none-league-s0": 90,
+        "none-league-s1": 88,
+        "none-alternating-s0": 60,
+        "none-alternating-s1": 62,
+        "none-simultaneous-s0": 70,
+    }  # against other runs' evaders
     faced = {name: {"greedy": (90, 100), **{o: (rate[name], 100) for o in RUNS if o != name}} for name in RUNS}
     common, league, alternating, p = contrast(faced, RUNS[:2], RUNS[2:4])
     assert common == {"greedy", "none-simultaneous-s0"}  # not the evaders of the runs compared: one of them met each
@@ -79,9 +93,13 @@ def test_kinds_are_compared_over_every_evader_stratified_by_evader() -> None:
 
     def faced(bonus: int) -> dict[str, dict[str, tuple[int, int]]]:
         gain = {name: bonus if name.startswith("bimdn") else 0 for name in runs}
-        return {name: {"greedy": (93 + 2 * name.endswith("s1") + gain[name], 100),  # seeds differ, kinds alike
-                       **{o: ((60 if o in hard else 90) + gain[name], 100) for o in runs if o != name}}
-                for name in runs}
+        return {
+            name: {
+                "greedy": (93 + 2 * name.endswith("s1") + gain[name], 100),  # seeds differ, kinds alike
+                **{o: ((60 if o in hard else 90) + gain[name], 100) for o in runs if o != name},
+            }
+            for name in runs
+        }
 
     # equal against each evader; pooled, bimdn looks better only because it meets its own kind's evaders less
     every, rate_b, rate_n, p, excess, p_stratified = over_every_evader(faced(0), runs[:2], runs[2:])
@@ -98,13 +116,17 @@ def test_compare_refuses_with_one_line(tmp_path: Path) -> None:
     runner = CliRunner()
     fake_run(tmp_path / "zoo", "sp", 1.0, 1)
     zoo = f"a={tmp_path / 'zoo'}"
-    for arms, says in ((["a"], "LABEL=ZOO"), ([zoo, zoo], "labels of their own"),
-                       ([f"a={tmp_path / 'none'}"], "is not a folder"),
-                       ([f"a={tmp_path / 'zoo'}"], None)):
+    for arms, says in (
+        (["a"], "LABEL=ZOO"),
+        ([zoo, zoo], "labels of their own"),
+        ([f"a={tmp_path / 'none'}"], "is not a folder"),
+        ([f"a={tmp_path / 'zoo'}"], None),
+    ):
         args = [part for arm in arms for part in ("--arms", arm)]
         result = runner.invoke(app, ["experiment", "compare", *args, "--round", "5", "-c", "quick"])
         assert result.exit_code == 1 and "Traceback" not in result.output
         assert says is None or says in result.output
-    result = runner.invoke(app, ["experiment", "compare", "--arms", f"a={tmp_path / 'zoo'}", "--round", "1",
-                                 "--cpu-hours", "1"])
+    result = runner.invoke(
+        app, ["experiment", "compare", "--arms", f"a={tmp_path / 'zoo'}", "--round", "1", "--cpu-hours", "1"]
+    )
     assert result.exit_code == 1 and "not both" in result.output

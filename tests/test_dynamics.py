@@ -20,9 +20,14 @@ def commonroad_parameters(car: CarAgent) -> SimpleNamespace:
     return SimpleNamespace(
         a=car.lf,
         b=car.lr,
-        steering=SimpleNamespace(min=car.steer_min, max=car.steer_max, v_min=-car.steer_rate_max, v_max=car.steer_rate_max),
+        steering=SimpleNamespace(
+            min=car.steer_min, max=car.steer_max, v_min=-car.steer_rate_max, v_max=car.steer_rate_max
+        ),
         longitudinal=SimpleNamespace(
-            v_min=car.v_min, v_max=car.v_max, v_switch=math.inf if car.v_switch is None else car.v_switch, a_max=car.a_max
+            v_min=car.v_min,
+            v_max=car.v_max,
+            v_switch=math.inf if car.v_switch is None else car.v_switch,
+            a_max=car.a_max,
         ),
     )
 
@@ -86,8 +91,12 @@ def test_car_constraints_match_commonroad_functions() -> None:
     action[::5] = 0.0
     steer_rate, accel = dyn.inputs(dyn.from_state(state), action)
     for i in range(n):
-        assert steer_rate[i] == pytest.approx(steering_constraints(state[2, i], action[i, 0] * car.steer_rate_max, p.steering))
-        assert accel[i] == pytest.approx(acceleration_constraints(state[3, i], action[i, 1] * car.a_max, p.longitudinal))
+        assert steer_rate[i] == pytest.approx(
+            steering_constraints(state[2, i], action[i, 0] * car.steer_rate_max, p.steering)
+        )
+        assert accel[i] == pytest.approx(
+            acceleration_constraints(state[3, i], action[i, 1] * car.a_max, p.longitudinal)
+        )
 
 
 def test_point_mass_euler_and_limits() -> None:

@@ -29,7 +29,8 @@ from pecli.zoo import metadata_path
 runner = CliRunner()
 
 SMOKE = {
-    "name": "t", "scenario": "quick",
+    "name": "t",
+    "scenario": "quick",
     "runs": {"kinds": ["none"], "seeds": [0], "rounds": 1, "steps_per_round": 100},
 }
 
@@ -41,9 +42,20 @@ def write(tmp_path: Path, data: dict) -> Path:
 
 
 def test_builtin_experiments() -> None:
-    assert {"smoke", "table1", "table1-small", "table2", "strength", "schedules", "strength-small",
-            "strength-exploiters", "strength-joingames", "strength-share", "strength-lite", "strength-floor"} <= set(
-        builtin_experiments())
+    assert {
+        "smoke",
+        "table1",
+        "table1-small",
+        "table2",
+        "strength",
+        "schedules",
+        "strength-small",
+        "strength-exploiters",
+        "strength-joingames",
+        "strength-share",
+        "strength-lite",
+        "strength-floor",
+    } <= set(builtin_experiments())
     small = load_experiment("table1-small")
     assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
     assert len(small.runs()) == 15 and len({run.name for run in small.runs()}) == 15
@@ -54,23 +66,38 @@ def test_builtin_experiments() -> None:
     assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200
     schedules = load_experiment("schedules")  # the curriculum's span is fixed, whatever the CPU budget stops
     assert [(r.kind, r.seed, r.schedule) for r in schedules.runs()] == [  # the league first, as in strength.yaml
-        ("none", seed, schedule) for schedule in ("league", "alternating", "simultaneous") for seed in (0, 1, 2)]
-    assert all(r.cpu_hours == 0.5 and r.scenario.training.curriculum.span(6_000_000) == 300_000
-               for r in schedules.runs())
+        ("none", seed, schedule) for schedule in ("league", "alternating", "simultaneous") for seed in (0, 1, 2)
+    ]
+    assert all(
+        r.cpu_hours == 0.5 and r.scenario.training.curriculum.span(6_000_000) == 300_000 for r in schedules.runs()
+    )
     strength = {(r.kind, r.seed, r.schedule): r for r in load_experiment("strength").runs()}
     for run in schedules.runs():  # strength.yaml's `none` runs (it extends strength), stopped earlier
         theirs = strength[(run.kind, run.seed, run.schedule)]
         assert run.name == theirs.name and run.scenario.training == theirs.scenario.training
     small = load_experiment("strength-small")  # the league as measured best at half a CPU-hour: no exploiters
     assert [(r.kind, r.seed, r.schedule) for r in small.runs()] == [
-        (kind, seed, "league") for seed in (0, 1, 2) for kind in ("none", "bimdn")]
+        (kind, seed, "league") for seed in (0, 1, 2) for kind in ("none", "bimdn")
+    ]
     league = small.runs()[0].scenario.training.selfplay
     assert (league.opponents, league.league_exploiter_every, league.league_floor, league.league_floor_split) == (
-        "league", 0, 0.3, "pfsp")
+        "league",
+        0,
+        0.3,
+        "pfsp",
+    )
     late = load_experiment("strength-exploiters").runs()[0].scenario.training.selfplay  # its exploiter after 2 CPU-h
-    assert (late.league_exploiter_every, late.league_exploiter_after, late.league_exploiter_roles) == (1, 2.0, ["evader"])
+    assert (late.league_exploiter_every, late.league_exploiter_after, late.league_exploiter_roles) == (
+        1,
+        2.0,
+        ["evader"],
+    )
     joining = load_experiment("strength-joingames").runs()[0].scenario.training.selfplay  # join games, a timeout
-    assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (3.0, 200, 3)
+    assert (joining.league_exploiter_after, joining.exploiter_join_games, joining.league_exploiter_timeout) == (
+        3.0,
+        200,
+        3,
+    )
     sharing = load_experiment("strength-share").runs()[0].scenario.training.selfplay  # and a share of the games
     assert (sharing.exploiter_join_games, sharing.league_exploiter_share, sharing.league_floor) == (200, 0.25, 0.3)
     lite = load_experiment("strength-lite").runs()  # strength-small's runs but for a BiMDN of 64 units
@@ -95,25 +122,32 @@ def test_builtin_experiments() -> None:
         assert with_overrides(preset, settings).training == run.scenario.training
 
 
-@pytest.mark.parametrize(("change", "message"), [
-    ({"extra": 1}, "extra: unknown key"),
-    ({"runs": {**SMOKE["runs"], "kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
-    ({"runs": {**SMOKE["runs"], "kinds": []}}, "runs.kinds: List should have at least 1 item"),
-    ({"runs": {**SMOKE["runs"], "seeds": "zero"}}, "runs.seeds: Input should be a valid list"),
-    ({"ranking": {"keep": 0}}, "ranking.keep: Input should be greater than or equal to 1"),
-    ({"training": {"batch_size": "big"}}, "training.batch_size: Input should be a valid integer"),
-    ({"training": {"no_such": 1}}, "training.no_such: unknown key"),
-    ({"scenario": "nowhere"}, "scenario: config not found: nowhere"),
-    ({"runs": {**SMOKE["runs"], "seeds": [True]}}, "runs.seeds.0: a number is expected here, not the boolean true"),
-    ({"runs": {**SMOKE["runs"], "schedules": ["pursuer"]}}, "train only pursuers"),
-    ({"runs": {**SMOKE["runs"], "schedules": ["pursuer", "evader"], "opponent": "greedy"}},
-     "runs.opponent: one opponent cannot train both"),
-    ({"runs": {**SMOKE["runs"], "schedules": ["selfplay", "evader"], "opponent": "greedy"}},
-     "runs.opponent: 'greedy' cannot play pursuer"),
-    ({"tournament": {"players": ["hj"]}}, "tournament.players.0: hj plays point mass vs point mass only"),
-    ({"tournament": {"players": ["grabby"]}}, "tournament.players.0: unknown player 'grabby'"),
-    ({"tournament": {"episodes": 10**7}}, "tournament.episodes: Input should be less than or equal to 1000000"),
-])
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"extra": 1}, "extra: unknown key"),
+        ({"runs": {**SMOKE["runs"], "kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
+        ({"runs": {**SMOKE["runs"], "kinds": []}}, "runs.kinds: List should have at least 1 item"),
+        ({"runs": {**SMOKE["runs"], "seeds": "zero"}}, "runs.seeds: Input should be a valid list"),
+        ({"ranking": {"keep": 0}}, "ranking.keep: Input should be greater than or equal to 1"),
+        ({"training": {"batch_size": "big"}}, "training.batch_size: Input should be a valid integer"),
+        ({"training": {"no_such": 1}}, "training.no_such: unknown key"),
+        ({"scenario": "nowhere"}, "scenario: config not found: nowhere"),
+        ({"runs": {**SMOKE["runs"], "seeds": [True]}}, "runs.seeds.0: a number is expected here, not the boolean true"),
+        ({"runs": {**SMOKE["runs"], "schedules": ["pursuer"]}}, "train only pursuers"),
+        (
+            {"runs": {**SMOKE["runs"], "schedules": ["pursuer", "evader"], "opponent": "greedy"}},
+            "runs.opponent: one opponent cannot train both",
+        ),
+        (
+            {"runs": {**SMOKE["runs"], "schedules": ["selfplay", "evader"], "opponent": "greedy"}},
+            "runs.opponent: 'greedy' cannot play pursuer",
+        ),
+        ({"tournament": {"players": ["hj"]}}, "tournament.players.0: hj plays point mass vs point mass only"),
+        ({"tournament": {"players": ["grabby"]}}, "tournament.players.0: unknown player 'grabby'"),
+        ({"tournament": {"episodes": 10**7}}, "tournament.episodes: Input should be less than or equal to 1000000"),
+    ],
+)
 def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, message: str) -> None:
     path = write(tmp_path, {**SMOKE, **change})
     with pytest.raises(ConfigError) as info:
@@ -126,8 +160,16 @@ def test_an_experiment_extends_another_key_by_key(tmp_path: Path) -> None:
     from pecli.scenario import builtin_config_dir
 
     mine = tmp_path / "mine.yaml"  # a built-in, one nested setting changed, the seeds replaced whole
-    mine.write_text(yaml.safe_dump({"name": "mine", "extends": "strength-small", "runs": {"seeds": [7]},
-                                    "training": {"selfplay": {"league_floor": 0.5}}}))
+    mine.write_text(
+        yaml.safe_dump(
+            {
+                "name": "mine",
+                "extends": "strength-small",
+                "runs": {"seeds": [7]},
+                "training": {"selfplay": {"league_floor": 0.5}},
+            }
+        )
+    )
     loaded, small = load_experiment(mine), load_experiment("strength-small")
     assert loaded.spec.name == "mine" and loaded.spec.description == ""  # the name is its own; no description
     assert [(r.kind, r.seed) for r in loaded.runs()] == [("none", 7), ("bimdn", 7)]
@@ -136,20 +178,24 @@ def test_an_experiment_extends_another_key_by_key(tmp_path: Path) -> None:
     assert loaded.spec.tournament == small.spec.tournament and loaded.spec.runs.cpu_hours == small.spec.runs.cpu_hours
     folder = tmp_path / "games"  # a file of the user's, its scenario file beside it, extended from elsewhere
     folder.mkdir()
-    (folder / "game.yaml").write_text((builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150",
-                                                                                               "horizon: 120"))
+    (folder / "game.yaml").write_text(
+        (builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150", "horizon: 120")
+    )
     (folder / "base.yaml").write_text(yaml.safe_dump({**SMOKE, "scenario": "game.yaml"}))
     (tmp_path / "top.yaml").write_text(yaml.safe_dump({"name": "top", "extends": "games/base.yaml"}))
     assert load_experiment(tmp_path / "top.yaml").runs()[0].scenario.horizon == 120
 
 
-@pytest.mark.parametrize(("top", "message"), [
-    ({"extends": "strength-small"}, "needs a name of its own"),
-    ({"name": "x", "extends": "nothing-such"}, "extends: experiment not found: nothing-such"),
-    ({"name": "x", "extends": ["strength-small"]}, "extends: give the experiment it starts from"),
-    ({"name": "x", "extends": "exp.yaml"}, "a loop"),
-    ({"name": "x", "extends": "strength-small", "runs": {"kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
-])
+@pytest.mark.parametrize(
+    ("top", "message"),
+    [
+        ({"extends": "strength-small"}, "needs a name of its own"),
+        ({"name": "x", "extends": "nothing-such"}, "extends: experiment not found: nothing-such"),
+        ({"name": "x", "extends": ["strength-small"]}, "extends: give the experiment it starts from"),
+        ({"name": "x", "extends": "exp.yaml"}, "a loop"),
+        ({"name": "x", "extends": "strength-small", "runs": {"kinds": ["lstm"]}}, "runs.kinds.0: Input should be"),
+    ],
+)
 def test_a_bad_extends_gives_one_line(tmp_path: Path, top: dict, message: str) -> None:
     path = write(tmp_path, top)
     with pytest.raises(ConfigError) as info:
@@ -167,10 +213,12 @@ def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path
     other = make_checkpoint(tmp_path / "zoo", load_scenario("point_mass"), "none")  # another game than quick's
     (tmp_path / "empty").mkdir()
     (tmp_path / "junk.zip").write_bytes(b"not a checkpoint")
-    for player, message in [(str(other), "trained on scenario 'point_mass', not 'quick'"),
-                            (str(tmp_path / "zoo"), "no checkpoint of scenario 'quick' under"),
-                            (str(tmp_path / "empty"), "no checkpoints under"),
-                            (str(tmp_path / "junk.zip"), "junk.zip")]:
+    for player, message in [
+        (str(other), "trained on scenario 'point_mass', not 'quick'"),
+        (str(tmp_path / "zoo"), "no checkpoint of scenario 'quick' under"),
+        (str(tmp_path / "empty"), "no checkpoints under"),
+        (str(tmp_path / "junk.zip"), "junk.zip"),
+    ]:
         path = write(tmp_path, {**SMOKE, "tournament": {"players": [player]}})
         with pytest.raises(ConfigError, match=f"tournament.players.0: .*{message}") as info:
             load_experiment(path)
@@ -182,8 +230,9 @@ def test_saved_tournament_players_must_be_of_the_experiments_game(tmp_path: Path
 def test_the_training_left_is_estimated_from_the_finished_runs_of_each_kind() -> None:
     from pecli.experiment.runs import RunProgress, training_left
 
-    experiment = experiment_from_dict({**SMOKE, "runs": {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1, 2]}},
-                                      "exp.yaml")
+    experiment = experiment_from_dict(
+        {**SMOKE, "runs": {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1, 2]}}, "exp.yaml"
+    )
     runs = {run.name: run for run in experiment.runs()}
     progress = {name: RunProgress(0, 2, 0, 0.0, False) for name in runs}
     progress["none-s0"] = RunProgress(2, 2, 0, 100.0, True)
@@ -201,9 +250,12 @@ def test_a_scenario_file_is_read_beside_the_experiment(tmp_path: Path) -> None:
 
     folder = tmp_path / "mine"
     folder.mkdir()
-    (folder / "game.yaml").write_text((builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150",
-                                                                                               "horizon: 120"))
-    loaded = load_experiment(write(folder, {**SMOKE, "scenario": "game.yaml", "training": {"selfplay": {"pfsp_power": 1}}}))
+    (folder / "game.yaml").write_text(
+        (builtin_config_dir() / "quick.yaml").read_text().replace("horizon: 150", "horizon: 120")
+    )
+    loaded = load_experiment(
+        write(folder, {**SMOKE, "scenario": "game.yaml", "training": {"selfplay": {"pfsp_power": 1}}})
+    )
     run = loaded.runs()[0]
     assert run.scenario.horizon == 120 and run.scenario.training.selfplay.pfsp_power == 1
     assert Path(loaded.spec.scenario) == (folder / "game.yaml").resolve()  # so --out can read it from anywhere
@@ -257,13 +309,15 @@ def test_cli_refuses_a_bad_file_in_one_line(tmp_path: Path) -> None:
 
 def test_cli_shows_an_experiment_as_it_will_run(tmp_path: Path) -> None:
     result = runner.invoke(app, ["experiment", "show", "strength-share"])  # extends strength-joingames, which extends
-    assert result.exit_code == 0, result.output                            # strength-small
-    shown = yaml.safe_load(result.output[:result.output.index("fingerprint ")])
+    assert result.exit_code == 0, result.output  # strength-small
+    shown = yaml.safe_load(result.output[: result.output.index("fingerprint ")])
     assert shown["name"] == "strength-share" and "extends" not in shown
     assert shown["training"]["selfplay"]["league_exploiter_share"] == 0.25  # its own
     assert shown["training"]["selfplay"]["exploiter_join_games"] == 200  # strength-joingames'
     assert shown["training"]["selfplay"]["league_floor"] == 0.3  # strength-small's
-    assert f"fingerprint {load_experiment('strength-share').spec.fingerprint()}; 6 runs: none-league-s0" in result.output
+    assert (
+        f"fingerprint {load_experiment('strength-share').spec.fingerprint()}; 6 runs: none-league-s0" in result.output
+    )
     result = runner.invoke(app, ["experiment", "show", str(write(tmp_path, {"extends": "strength-small"}))])
     assert result.exit_code == 1 and result.output.strip().count("\n") == 0 and "a name of its own" in result.output
 
@@ -287,8 +341,15 @@ def test_self_play_schedules_and_a_cpu_budget_in_the_grid(tmp_path: Path) -> Non
     grid = {**SMOKE["runs"], "schedules": ["selfplay", "simultaneous", "league", "pursuer"], "cpu_hours": 2}
     runs = {run.name: run for run in experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()}
     assert list(runs) == ["none-s0", "none-simultaneous-s0", "none-league-s0", "none-pursuer-s0"]
-    settings = {name: (run.scenario.training.selfplay.schedule, run.scenario.training.selfplay.opponents, run.roles,
-                       run.cpu_hours) for name, run in runs.items()}
+    settings = {
+        name: (
+            run.scenario.training.selfplay.schedule,
+            run.scenario.training.selfplay.opponents,
+            run.roles,
+            run.cpu_hours,
+        )
+        for name, run in runs.items()
+    }
     assert settings["none-simultaneous-s0"][0] == "simultaneous"
     assert settings["none-league-s0"][:2] == ("alternating", "league")
     assert settings["none-league-s0"][2] == ("pursuer", "evader") and settings["none-league-s0"][3] == 2
@@ -302,8 +363,16 @@ def test_runs_start_schedule_by_schedule_with_every_kind_of_a_seed_together() ->
     """A cluster smaller than the grid finishes the first schedule for every kind, seed by seed, first."""
     grid = {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1], "schedules": ["league", "alternating"]}
     names = [run.name for run in experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()]
-    assert names == ["none-league-s0", "bimdn-league-s0", "none-league-s1", "bimdn-league-s1",
-                     "none-alternating-s0", "bimdn-alternating-s0", "none-alternating-s1", "bimdn-alternating-s1"]
+    assert names == [
+        "none-league-s0",
+        "bimdn-league-s0",
+        "none-league-s1",
+        "bimdn-league-s1",
+        "none-alternating-s0",
+        "bimdn-alternating-s0",
+        "none-alternating-s1",
+        "bimdn-alternating-s1",
+    ]
 
 
 def test_a_setting_added_since_a_run_started_is_a_change_only_where_set_otherwise(paper) -> None:
@@ -325,8 +394,16 @@ def test_the_ranking_draws_its_pairings_over_runs_in_the_grids_own_order() -> No
     grid = {**SMOKE["runs"], "kinds": ["none", "bimdn"], "seeds": [0, 1], "schedules": ["league", "alternating"]}
     experiment = experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml")
     names = [run.name for run in experiment.grid_order(experiment.runs())]
-    assert names == ["none-league-s0", "none-alternating-s0", "none-league-s1", "none-alternating-s1",
-                     "bimdn-league-s0", "bimdn-alternating-s0", "bimdn-league-s1", "bimdn-alternating-s1"]
+    assert names == [
+        "none-league-s0",
+        "none-alternating-s0",
+        "none-league-s1",
+        "none-alternating-s1",
+        "bimdn-league-s0",
+        "bimdn-alternating-s0",
+        "bimdn-league-s1",
+        "bimdn-alternating-s1",
+    ]
 
 
 @pytest.mark.parametrize("schedule", ["selfplay", "league"])
@@ -335,8 +412,11 @@ def test_a_cpu_budget_ends_a_run_after_the_round_that_reaches_it(tmp_path: Path,
     call (a retried task) does nothing."""
     from pecli.experiment.runs import execute_run
 
-    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
-            "runs": {**SMOKE["runs"], "rounds": 3, "schedules": [schedule], "cpu_hours": 1e-6}}
+    data = {
+        **SMOKE,
+        "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+        "runs": {**SMOKE["runs"], "rounds": 3, "schedules": [schedule], "cpu_hours": 1e-6},
+    }
     (run,) = experiment_from_dict(data, "exp.yaml").runs()
     lines: list[str] = []
     first = execute_run(run, tmp_path, report=lines.append)
@@ -376,8 +456,11 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     called again without the pause, the same run trains its second round."""
     from pecli.experiment.folder import stage_lines
 
-    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
-            "runs": {**SMOKE["runs"], "rounds": 2}}
+    data = {
+        **SMOKE,
+        "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+        "runs": {**SMOKE["runs"], "rounds": 2},
+    }
     experiment = experiment_from_dict(data, "exp.yaml")
     with pytest.raises(PecliError, match="positive number of hours"):
         ExperimentRunner(experiment, tmp_path, until_cpu_hours=0)
@@ -389,8 +472,9 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     assert run_progress(run, tmp_path / "zoo").round == 1 and not run_progress(run, tmp_path / "zoo").done
     state = json.loads((tmp_path / "experiment.json").read_text())
     assert state["stages"]["train"] == "paused" and state["sessions"][-1]["ended"] == "paused"
-    assert stage_lines(tmp_path, state, alive=False) == ["training: paused, every run at 1e-06 CPU-h or its own "
-                                                         "budget (--until-cpu-hours)"]
+    assert stage_lines(tmp_path, state, alive=False) == [
+        "training: paused, every run at 1e-06 CPU-h or its own budget (--until-cpu-hours)"
+    ]
     assert ExperimentRunner(experiment, tmp_path, until_cpu_hours=1e-6).run(cluster) is None  # nothing to train
     assert len(cluster.trained) == 1
     again = ExperimentRunner(experiment, tmp_path)
@@ -400,13 +484,17 @@ def test_until_cpu_hours_pauses_every_run_at_that_budget_before_the_ranking(tmp_
     assert [row.status for row in again.rows] == ["done"]
 
 
-def test_a_finished_runs_task_writes_the_averages_a_stop_left_behind_and_trains_nothing(tmp_path: Path,
-                                                                                        monkeypatch) -> None:
+def test_a_finished_runs_task_writes_the_averages_a_stop_left_behind_and_trains_nothing(
+    tmp_path: Path, monkeypatch
+) -> None:
     """Stopped between a run's last round and its averages: the next session submits the finished run, whose
     task writes them (counted as skipped: nothing is trained); once they are there, it is not submitted, with
     a relative --out too (the task writes absolute paths)."""
-    data = {**SMOKE, "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
-            "runs": {**SMOKE["runs"], "rounds": 1}}
+    data = {
+        **SMOKE,
+        "training": {"learning_starts": 50, "batch_size": 16, "net_arch": [16, 16], "n_envs": 2},
+        "runs": {**SMOKE["runs"], "rounds": 1},
+    }
     experiment = experiment_from_dict(data, "exp.yaml")
     (run,) = experiment.runs()
     monkeypatch.chdir(tmp_path)
@@ -448,12 +536,14 @@ def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:
     exploiter = Player("exploiter", f"zoo/{run.name}/exploiter-pursuer/round-001.zip", "pursuer", "b")
     evader = Player("evader", f"zoo/{run.name}/evader/round-001.zip", "evader", "c")
     pairings = [PairingResult("main", "evader", 10, 2, 0.5, 0.1), PairingResult("exploiter", "evader", 10, 9, 0.5, 0.1)]
-    results = TournamentResults(load_scenario("quick"), {"pursuer": [main, exploiter], "evader": [evader]}, pairings,
-                                [], 10, [0])
+    results = TournamentResults(
+        load_scenario("quick"), {"pursuer": [main, exploiter], "evader": [evader]}, pairings, [], 10, [0]
+    )
     assert keep_best(results, [run], keep=1)[run.name] == {"pursuer": [main.spec], "evader": [evader.spec]}
 
 
 # -- on Ray ---------------------------------------------------------------------------------------------
+
 
 def ray_processes(group: int | None = None) -> list[str]:
     """Ray's processes alive in process group ``group`` (default: this one's, where an embedded Ray starts its
@@ -463,9 +553,13 @@ def ray_processes(group: int | None = None) -> list[str]:
     a dead raylet in ``ps`` as ``[raylet] <defunct>`` for a while."""
     group = os.getpgrp() if group is None else group
     out = subprocess.run(["ps", "-eo", "pid,ppid,pgid,stat,args"], capture_output=True, text=True).stdout
-    return [line for line in out.splitlines()[1:] if int(line.split()[2]) == group
-            and not line.split()[3].startswith("Z")
-            and ("raylet" in line or "gcs_server" in line or "ray::" in line)]
+    return [
+        line
+        for line in out.splitlines()[1:]
+        if int(line.split()[2]) == group
+        and not line.split()[3].startswith("Z")
+        and ("raylet" in line or "gcs_server" in line or "ray::" in line)
+    ]
 
 
 def alive(pid: int) -> bool:
@@ -477,8 +571,11 @@ def alive(pid: int) -> bool:
 
 
 def cached_pairings(out: Path) -> int:
-    return sum(len(list((out / stage / "pairings").glob("*.json"))) for stage in ("ranking", "tournament")
-               if (out / stage / "pairings").is_dir())
+    return sum(
+        len(list((out / stage / "pairings").glob("*.json")))
+        for stage in ("ranking", "tournament")
+        if (out / stage / "pairings").is_dir()
+    )
 
 
 def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
@@ -525,9 +622,12 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
 
     experiment = load_experiment("smoke")
     out = tmp_path / "smoke"
-    driver = subprocess.Popen([sys.executable, "-m", "pecli", "experiment", "run", "smoke", "--cpus", "2", "--out",
-                               str(out), "-q"], start_new_session=True, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "pecli", "experiment", "run", "smoke", "--cpus", "2", "--out", str(out), "-q"],
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 240
         while not any(run_progress(run, out / "zoo").done for run in experiment.runs()):
@@ -547,8 +647,11 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
             os.killpg(driver.pid, signal.SIGKILL)  # Ray's agents, which take ~90 s to notice on their own
         except ProcessLookupError:
             pass
-    done = {run.name: (out / "zoo" / run.name / SELFPLAY_STATE).read_bytes() for run in experiment.runs()
-            if run_progress(run, out / "zoo").done}
+    done = {
+        run.name: (out / "zoo" / run.name / SELFPLAY_STATE).read_bytes()
+        for run in experiment.runs()
+        if run_progress(run, out / "zoo").done
+    }
     cached = cached_pairings(out)
 
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "object_store_memory": 80 * 1024**2})
@@ -574,12 +677,15 @@ def test_killed_driver_resumes_on_a_two_node_cluster(tmp_path: Path) -> None:
 def test_status_counts_the_pairings_a_stopped_stage_has_played(tmp_path: Path) -> None:
     from pecli.experiment.folder import stage_lines
 
-    state = {"stages": {"ranking": {"pairings": 5, "status": "done"},
-                        "tournament": {"pairings": 4, "status": "running"}}}
+    state = {
+        "stages": {"ranking": {"pairings": 5, "status": "done"}, "tournament": {"pairings": 4, "status": "running"}}
+    }
     cache = tmp_path / "tournament" / "pairings"
     cache.mkdir(parents=True)
     for i in range(3):
         (cache / f"{i}.json").write_text("{}")
-    assert stage_lines(tmp_path, state, alive=False) == ["ranking: done, 5 pairings",
-                                                         "tournament: stopped, 3/4 pairings played"]
+    assert stage_lines(tmp_path, state, alive=False) == [
+        "ranking: done, 5 pairings",
+        "tournament: stopped, 3/4 pairings played",
+    ]
     assert stage_lines(tmp_path, state, alive=True)[1] == "tournament: running, 3/4 pairings played"

@@ -49,8 +49,14 @@ from pecli.zoo import Run
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
-TINY = {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [32, 32],
-        "belief_settings.hidden": 16, "belief_settings.fc": 16}
+TINY = {
+    "buffer_size": 500,
+    "batch_size": 16,
+    "learning_starts": 50,
+    "net_arch": [32, 32],
+    "belief_settings.hidden": 16,
+    "belief_settings.fc": 16,
+}
 
 
 def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pursuer") -> Path:
@@ -59,9 +65,13 @@ def make_checkpoint(zoo: Path, scenario: Scenario, belief: str, role: Role = "pu
     scenario = with_overrides(scenario, {**TINY, "belief": belief, "n_envs": 4})
     name = f"{belief}-{role}"
     job = TrainJob(role=role, scenario=scenario, opponent=DEFAULT_OPPONENT[role], zoo=zoo, name=name)
-    _, model, _ = make_learner(job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0)  # nothing to fit yet
+    _, model, _ = make_learner(
+        job, resolve_policy(job.opponent, opponent_of(role), scenario), seed=0
+    )  # nothing to fit yet
     model.learn(80)  # 50 transitions of warm-up, then a few updates
-    return Run.create(zoo, name, scenario, {"command": "test"}).save(model, role, "final", checkpoint_meta(job, model, 0))
+    return Run.create(zoo, name, scenario, {"command": "test"}).save(
+        model, role, "final", checkpoint_meta(job, model, 0)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -87,11 +97,27 @@ def test_every_belief_kind_exports_valid_checked_and_equal(exports, kind: str) -
     assert sidecar["role"] == "pursuer" and sidecar["belief"] == kind and sidecar["scenario"]["name"] == "quick"
     assert sidecar["control"]["dt_s"] == 0.1 and sidecar["control"]["rate_hz"] == pytest.approx(10.0)
     assert sidecar["parity"]["passed"] and sidecar["parity"]["max_action_difference"] <= 1e-5
-    assert [f["unit"] for f in sidecar["layout"]["row"]] == ["m", "m", "rad", "m/s", "rad", "m", "m", "m/s", "m/s", "1", "s"]
-    assert sidecar["outputs"][0]["fields"] == [{"name": "steering_velocity", "unit": "rad/s"},
-                                               {"name": "acceleration", "unit": "m/s^2"}]
+    assert [f["unit"] for f in sidecar["layout"]["row"]] == [
+        "m",
+        "m",
+        "rad",
+        "m/s",
+        "rad",
+        "m",
+        "m",
+        "m/s",
+        "m/s",
+        "1",
+        "s",
+    ]
+    assert sidecar["outputs"][0]["fields"] == [
+        {"name": "steering_velocity", "unit": "rad/s"},
+        {"name": "acceleration", "unit": "m/s^2"},
+    ]
     inputs = [i["name"] for i in sidecar["inputs"]]
-    assert inputs == ["obs"] + (["history"] if kind != "none" else []) + (["uniform", "normal"] if kind == "bimdn-mixed" else [])
+    assert inputs == ["obs"] + (["history"] if kind != "none" else []) + (
+        ["uniform", "normal"] if kind == "bimdn-mixed" else []
+    )
     report = check_export(model, checkpoint, episodes=2, seed=5)  # other games than the export's own check
     assert report.passed and report.max_action_difference <= 1e-5 and report.decisions > 0
 
@@ -111,8 +137,9 @@ def test_the_exported_belief_is_the_checkpoints(exports, quick: Scenario) -> Non
 
 
 def test_mixed_draws_follow_the_inverse_cdf() -> None:
-    mixture = Mixture(th.log(th.tensor([[0.2, 0.5, 0.3]])), th.tensor([[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]]),
-                      th.full((1, 3, 2), 0.5))
+    mixture = Mixture(
+        th.log(th.tensor([[0.2, 0.5, 0.3]])), th.tensor([[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]]), th.full((1, 3, 2), 0.5)
+    )
     uniform = th.tensor([[0.0, 0.19, 0.2, 0.69, 0.71, 0.999]])
     draws = mixture.sample_with(uniform, th.ones((1, 6, 2)))
     np.testing.assert_allclose(draws[0, :, 0].numpy(), [0.5, 0.5, 1.5, 1.5, 2.5, 2.5], atol=1e-6)
@@ -173,8 +200,9 @@ def test_units_round_trip(scenario: Scenario) -> None:
     k = game.dynamics["pursuer"].state_dim
     for role, own, opp in (("pursuer", state[:, :k], state[:, k:]), ("evader", state[:, k:], state[:, :k])):
         layout = SILayout(scenario, role)
-        si = np.column_stack([own, np.where(seen[role][:, None], opp, 0.0), np.where(seen[role], 1.0, -1.0),
-                              game.t * scenario.dt])
+        si = np.column_stack(
+            [own, np.where(seen[role][:, None], opp, 0.0), np.where(seen[role], 1.0, -1.0), game.t * scenario.dt]
+        )
         si = np.concatenate([si, np.zeros((1, layout.dim))])  # a padding row stays zero
         expected = np.concatenate([obs[role], np.zeros((1, layout.dim), np.float32)])
         np.testing.assert_allclose(layout.from_si(si), expected, rtol=0, atol=1e-6)
@@ -196,7 +224,9 @@ def test_units_round_trip(scenario: Scenario) -> None:
         np.testing.assert_allclose(SIEncoder(car)(th.as_tensor(turned)).numpy(), car.from_si(si), atol=1e-6)
 
 
-def record_game(scenario: Scenario, policy, seed: int, steps: int = 60) -> tuple[list[np.ndarray], list[np.ndarray], list]:
+def record_game(
+    scenario: Scenario, policy, seed: int, steps: int = 60
+) -> tuple[list[np.ndarray], list[np.ndarray], list]:
     """One game of ``policy`` (a pursuer) against greedy: SI states, actions, and the pursuer's sensor verdicts."""
     game = Game(scenario, n=1, seed=seed)
     obs = game.reset(seed=seed)
@@ -260,8 +290,24 @@ def test_runtime_memory_matches_the_simulations_over_long_games(exports, quick: 
 
 def test_runtime_needs_neither_torch_nor_the_simulator(exports, tmp_path: Path) -> None:
     _, model = exports["bimdn"]
-    blocked = ["torch", "stable_baselines3", "sb3_contrib", "gymnasium", "pettingzoo", "pydantic", "yaml", "scipy",
-               "filterpy", "matplotlib", "typer", "rich", "onnx", "pecli.game", "pecli.scenario", "pecli.policies"]
+    blocked = [
+        "torch",
+        "stable_baselines3",
+        "sb3_contrib",
+        "gymnasium",
+        "pettingzoo",
+        "pydantic",
+        "yaml",
+        "scipy",
+        "filterpy",
+        "matplotlib",
+        "typer",
+        "rich",
+        "onnx",
+        "pecli.game",
+        "pecli.scenario",
+        "pecli.policies",
+    ]
     script = textwrap.dedent(f"""
         import importlib.abc, sys
         BLOCKED = {blocked!r}
@@ -277,21 +323,31 @@ def test_runtime_needs_neither_torch_nor_the_simulator(exports, tmp_path: Path) 
         print("ok", sorted(m for m in BLOCKED if m in sys.modules))
         ours = sorted(m for m in sys.modules if m == "pecli" or m.startswith("pecli."))
         outside = sorted({{m.split(".")[0] for m in sys.modules}} - set(sys.stdlib_module_names)
-                         - {{"numpy", "onnxruntime", "pecli", "cython_runtime"}} - {{m.split(".")[0] for m in sys.builtin_module_names}})
+                         - {{"numpy", "onnxruntime", "pecli", "cython_runtime"}}
+                         - {{m.split(".")[0] for m in sys.builtin_module_names}})
         print("pecli", ours)
         print("others", [m for m in outside if not m.startswith("_")])
     """)
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path,
-                            env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.strip().splitlines()
     assert lines[0] == "ok []"
-    assert lines[1] == "pecli ['pecli', 'pecli.errors', 'pecli.onnx_guard', 'pecli.runtime']"  # what docs/export.md says to copy
+    assert (
+        lines[1] == "pecli ['pecli', 'pecli.errors', 'pecli.onnx_guard', 'pecli.runtime']"
+    )  # what docs/export.md says to copy
     assert lines[2] == "others []", lines[2]  # nothing beyond the standard library, NumPy and ONNX Runtime
 
 
-def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(exports, quick: Scenario,
-                                                                          tmp_path: Path) -> None:
+def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(
+    exports, quick: Scenario, tmp_path: Path
+) -> None:
     """An evader without a belief and a pursuer with a mixed belief (its draws seeded by the match), each
     entered twice: as the checkpoint and as its export."""
     paths = [str(path) for key in ("evader", "bimdn-mixed") for path in exports[key]]
@@ -301,7 +357,11 @@ def test_a_tournament_of_a_checkpoint_and_its_export_gives_the_same_results(expo
     for role, name in (("evader", "none-evader/evader/final"), ("pursuer", "bimdn-mixed-pursuer/pursuer/final")):
         others = [p.name for p in found.players[opponent_of(role)]]
         for other in others:
-            pair, twin = ((other, name), (other, name + ".onnx")) if role == "evader" else ((name, other), (name + ".onnx", other))
+            pair, twin = (
+                ((other, name), (other, name + ".onnx"))
+                if role == "evader"
+                else ((name, other), (name + ".onnx", other))
+            )
             assert grid[pair] == grid[twin], (pair, grid[pair], grid[twin])
         outcomes = [grid[(other, name) if role == "evader" else (name, other)][0] for other in others]
         assert 0 < sum(outcomes) < 12 * len(others)  # captures and escapes: the players' moves decide
@@ -336,7 +396,9 @@ def test_an_export_that_fails_parity_is_not_written(exports, tmp_path: Path, mon
     assert result.exit_code == 1 and "FAILED" in result.output and "parity check failed" in result.output
 
 
-def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, quick: Scenario, paper: Scenario) -> None:
+def test_missing_or_damaged_models_give_one_clear_line(
+    exports, tmp_path: Path, quick: Scenario, paper: Scenario
+) -> None:
     checkpoint, model = exports["none"]
     copy = tmp_path / "m.onnx"
 
@@ -400,10 +462,35 @@ def test_missing_or_damaged_models_give_one_clear_line(exports, tmp_path: Path, 
 def test_robots_config_trains_then_exports(tmp_path: Path) -> None:
     """configs/robots.yaml end to end: F1TENTH vs JetRacer, car vs car in the own frame, with a BiMDN."""
     zoo = tmp_path / "zoo"
-    train = ["train", "pursuer", "--config", str(ROOT / "configs" / "robots.yaml"), "--zoo", str(zoo), "--name", "r",
-             "-q", "--steps", "240", "--belief", "bimdn", "--set", "learning_starts=80", "--set", "batch_size=16",
-             "--set", "n_envs=4", "--set", "net_arch=[32, 32]", "--set", "belief_settings.hidden=16",
-             "--set", "belief_settings.warmup=80", "--set", "belief_settings.batch_size=16"]
+    train = [
+        "train",
+        "pursuer",
+        "--config",
+        str(ROOT / "configs" / "robots.yaml"),
+        "--zoo",
+        str(zoo),
+        "--name",
+        "r",
+        "-q",
+        "--steps",
+        "240",
+        "--belief",
+        "bimdn",
+        "--set",
+        "learning_starts=80",
+        "--set",
+        "batch_size=16",
+        "--set",
+        "n_envs=4",
+        "--set",
+        "net_arch=[32, 32]",
+        "--set",
+        "belief_settings.hidden=16",
+        "--set",
+        "belief_settings.warmup=80",
+        "--set",
+        "belief_settings.batch_size=16",
+    ]
     result = runner.invoke(app, train)
     assert result.exit_code == 0, result.output
     result = runner.invoke(app, ["export", "onnx", str(zoo / "r" / "pursuer" / "final.zip"), "-n", "2", "--json"])
@@ -497,7 +584,10 @@ def test_the_runtime_never_returns_a_nan_command(broken) -> None:
     [
         (lambda s: s["sensor"].update(fov_rad=1.0), r"sensor\.fov_rad is 1\.0, not 2\.09"),
         (lambda s: s.update(command_limits=[9.0, 2.0]), r"command_limits\[0\] is 9\.0, not 3\.2"),
-        (lambda s: s["scenario"].update(fingerprint="0123456789abcdef"), r"scenario\.fingerprint is '0123456789abcdef'"),
+        (
+            lambda s: s["scenario"].update(fingerprint="0123456789abcdef"),
+            r"scenario\.fingerprint is '0123456789abcdef'",
+        ),
         (lambda s: s["control"].update(dt_s=0.05), r"control\.dt_s is 0\.05, not 0\.1"),
         (lambda s: s["scenario"]["config"]["pursuer"]["sensor"].update(range=9.0), "the sidecar was edited"),
     ],
@@ -522,8 +612,9 @@ def test_the_runtime_refuses_a_time_that_is_not_a_number(exports) -> None:
 
 
 @pytest.mark.parametrize("key, value", [("history_length", 10**12), ("frame_stack", 10**9), ("dt_s", 1e300)])
-def test_a_sidecar_claiming_a_huge_window_is_refused_before_allocating(exports, tmp_path: Path, key: str,
-                                                                       value: float) -> None:
+def test_a_sidecar_claiming_a_huge_window_is_refused_before_allocating(
+    exports, tmp_path: Path, key: str, value: float
+) -> None:
     model = exports["none"][1]
     copy = tmp_path / "m.onnx"
     copy.write_bytes(model.read_bytes())

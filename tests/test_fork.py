@@ -45,8 +45,9 @@ def test_fork_copies_a_run_and_adds_scripted_players_to_its_pools(tmp_path: Path
     assert forked["turns"] == state["turns"]
     names = {role: [e["name"] for e in pool["entries"]] for role, pool in forked["pools"].items()}
     assert names == {"pursuer": ["evader-r1", "interceptor"], "evader": ["greedy", "pursuer-r1", "corner-sitter"]}
-    added = [e for pool in forked["pools"].values() for e in pool["entries"]
-             if e["name"] in ("corner-sitter", "interceptor")]
+    added = [
+        e for pool in forked["pools"].values() for e in pool["entries"] if e["name"] in ("corner-sitter", "interceptor")
+    ]
     assert [(e["generation"], e["episodes"]) for e in added] == [(0, 0), (0, 0)]  # scripted (generation 0): in for good
     assert json.loads((run / "selfplay.json").read_text()) == state  # the original is untouched
     assert not list((tmp_path / "arm").glob(".*partial"))
@@ -56,9 +57,11 @@ def test_fork_refuses_with_one_line_and_leaves_nothing(tmp_path: Path) -> None:
     run = tmp_path / "zoo" / "none-league-s0"
     make_run(run)
     arm = tmp_path / "arm"
-    for args, says in ((["--add", "nobody"], "not a scripted player"),
-                       (["--add", "greedy"], "already holds 'greedy'"),
-                       ([], None)):
+    for args, says in (
+        (["--add", "nobody"], "not a scripted player"),
+        (["--add", "greedy"], "already holds 'greedy'"),
+        ([], None),
+    ):
         result = fork(str(run), "--to", str(arm), *args)
         if says is None:
             assert result.returncode == 0, result.stderr

@@ -21,11 +21,18 @@ from pecli.errors import PecliError
 
 FUZZ = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
-scalars = st.one_of(st.none(), st.booleans(), st.integers(min_value=-(10**30), max_value=10**30),
-                    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20))
-json_values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=5),
-                                                            st.dictionaries(st.text(max_size=10), inner, max_size=5)),
-                           max_leaves=30)
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(10**30), max_value=10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=20),
+)
+json_values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=5), st.dictionaries(st.text(max_size=10), inner, max_size=5)),
+    max_leaves=30,
+)
 documents = st.one_of(
     json_values.map(lambda value: json.dumps(value)),
     st.binary(max_size=200).map(lambda data: data.decode("latin-1")),
@@ -54,18 +61,53 @@ def only_clear_errors(read, *args) -> None:
         assert str(exc) and "\n" not in str(exc).strip()
 
 
-META = {"role": "pursuer", "steps": 10, "episodes": 1, "algo": "td3", "belief": "none", "scenario": "quick",
-        "scenario_hash": "x", "opponent": "greedy", "frame_skip": 2, "frame_stack": 2, "history_length": 200,
-        "history_stride": 10, "policy_kwargs": {"net_arch": [16, 16], "n_critics": 2}}
-STATE = {"steps": 10, "episodes": 1, "n_updates": 0, "cpu_seconds": 1.0, "model": "model-000000010.zip",
-         "format": 1, "extra": {}}
-SELFPLAY = {"seed": 0, "curriculum_steps": 10, "pools": {"pursuer": {"role": "pursuer", "entries": [
-    {"name": "greedy", "spec": "greedy", "generation": 0}]}}, "turns": [], "cpu_hours": None}
-NASH = {"kind": "nash", "scenario": "quick", "scenario_hash": "x", "value": 0.5,
-        "pursuer": [{"name": "p", "spec": "pure-pursuit", "weight": 1.0}],
-        "evader": [{"name": "e", "spec": "greedy", "weight": 1.0}]}
-PAIRING = {"pursuer": "p", "evader": "e", "episodes": 10, "captures": 3, "time_to_capture_mean": 0.5,
-           "time_to_capture_std": 0.1}
+META = {
+    "role": "pursuer",
+    "steps": 10,
+    "episodes": 1,
+    "algo": "td3",
+    "belief": "none",
+    "scenario": "quick",
+    "scenario_hash": "x",
+    "opponent": "greedy",
+    "frame_skip": 2,
+    "frame_stack": 2,
+    "history_length": 200,
+    "history_stride": 10,
+    "policy_kwargs": {"net_arch": [16, 16], "n_critics": 2},
+}
+STATE = {
+    "steps": 10,
+    "episodes": 1,
+    "n_updates": 0,
+    "cpu_seconds": 1.0,
+    "model": "model-000000010.zip",
+    "format": 1,
+    "extra": {},
+}
+SELFPLAY = {
+    "seed": 0,
+    "curriculum_steps": 10,
+    "pools": {"pursuer": {"role": "pursuer", "entries": [{"name": "greedy", "spec": "greedy", "generation": 0}]}},
+    "turns": [],
+    "cpu_hours": None,
+}
+NASH = {
+    "kind": "nash",
+    "scenario": "quick",
+    "scenario_hash": "x",
+    "value": 0.5,
+    "pursuer": [{"name": "p", "spec": "pure-pursuit", "weight": 1.0}],
+    "evader": [{"name": "e", "spec": "greedy", "weight": 1.0}],
+}
+PAIRING = {
+    "pursuer": "p",
+    "evader": "e",
+    "episodes": 10,
+    "captures": 3,
+    "time_to_capture_mean": 0.5,
+    "time_to_capture_std": 0.1,
+}
 
 
 @FUZZ
@@ -121,8 +163,9 @@ def test_pairing_cache(tmp_path: Path, text: str) -> None:
     from pecli.tournament import Player, _cached
 
     (tmp_path / "p.json").write_text(text, encoding="utf-8", errors="surrogatepass")
-    result = _cached(tmp_path / "p.json", Player("p", "pure-pursuit", "pursuer", "x"),
-                     Player("e", "greedy", "evader", "y"))
+    result = _cached(
+        tmp_path / "p.json", Player("p", "pure-pursuit", "pursuer", "x"), Player("e", "greedy", "evader", "y")
+    )
     if result is not None:  # believed only when it is what a pairing can give
         assert 0 <= result.captures <= result.episodes and math.isfinite(result.time_to_capture_mean)
 
@@ -146,8 +189,10 @@ def test_run_config(tmp_path: Path, text: str) -> None:
 
 
 @FUZZ
-@given(key=st.sampled_from(["steps", "gamma", "net_arch", "selfplay.rounds", "curriculum.enabled", "nope.x"]),
-       value=st.one_of(st.text(max_size=40), documents.map(lambda text: text[:6000])))
+@given(
+    key=st.sampled_from(["steps", "gamma", "net_arch", "selfplay.rounds", "curriculum.enabled", "nope.x"]),
+    value=st.one_of(st.text(max_size=40), documents.map(lambda text: text[:6000])),
+)
 def test_set_values(quick, key: str, value: str) -> None:
     from pecli.rl.train import parse_overrides, with_overrides
 
@@ -167,12 +212,15 @@ def test_a_best_response_record_from_elsewhere_is_refused(tmp_path: Path, reader
 
 
 @settings(max_examples=25, deadline=None)
-@given(episodes=st.one_of(st.integers(min_value=-3, max_value=30), st.text(max_size=8)),
-       seed=st.one_of(st.integers(min_value=-3, max_value=2**40), st.text(max_size=8)),
-       pursuer=st.one_of(st.sampled_from(["pure-pursuit", "interceptor", "greedy", "nash:", "hj:x=1", "a:b"]),
-                         st.text(max_size=12)),
-       evader=st.one_of(st.sampled_from(["greedy", "hider", "random-walk", "x.zip", "x.onnx"]), st.text(max_size=12)),
-       config=st.one_of(st.just("quick"), st.text(max_size=12)))
+@given(
+    episodes=st.one_of(st.integers(min_value=-3, max_value=30), st.text(max_size=8)),
+    seed=st.one_of(st.integers(min_value=-3, max_value=2**40), st.text(max_size=8)),
+    pursuer=st.one_of(
+        st.sampled_from(["pure-pursuit", "interceptor", "greedy", "nash:", "hj:x=1", "a:b"]), st.text(max_size=12)
+    ),
+    evader=st.one_of(st.sampled_from(["greedy", "hider", "random-walk", "x.zip", "x.onnx"]), st.text(max_size=12)),
+    config=st.one_of(st.just("quick"), st.text(max_size=12)),
+)
 def test_play_options(episodes, seed, pursuer: str, evader: str, config: str) -> None:
     """``pecli play`` with any option values: a result, one ``error:`` line or a usage error, never an internal
     error (module:Class strings are left out: importing a module a user names is what they asked for)."""
@@ -184,8 +232,12 @@ def test_play_options(episodes, seed, pursuer: str, evader: str, config: str) ->
         pursuer = pursuer.replace(":", "_")
     if ":" in evader:
         evader = evader.replace(":", "_")
-    result = CliRunner().invoke(app, ["play", "-n", str(episodes), "--seed", str(seed), "-p", pursuer, "-e", evader,
-                                      "-c", config, "--json"])
+    result = CliRunner().invoke(
+        app, ["play", "-n", str(episodes), "--seed", str(seed), "-p", pursuer, "-e", evader, "-c", config, "--json"]
+    )
     assert result.exit_code in (0, 1, 2), result.output
-    assert "internal error" not in result.output and not isinstance(result.exception, Exception) or \
-        isinstance(result.exception, SystemExit), result.output
+    assert (
+        "internal error" not in result.output
+        and not isinstance(result.exception, Exception)
+        or isinstance(result.exception, SystemExit)
+    ), result.output

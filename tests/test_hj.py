@@ -52,10 +52,12 @@ def arena(point_mass: Scenario) -> Solution:
 def full_observation(scenario: Scenario) -> Scenario:
     """``scenario`` with both sensor ranges at 30 m: each player always sees the other."""
     far = scenario.pursuer.sensor.model_copy(update={"range": 30.0})
-    return scenario.model_copy(update={
-        "pursuer": scenario.pursuer.model_copy(update={"sensor": far}),
-        "evader": scenario.evader.model_copy(update={"sensor": far}),
-    })
+    return scenario.model_copy(
+        update={
+            "pursuer": scenario.pursuer.model_copy(update={"sensor": far}),
+            "evader": scenario.evader.model_copy(update={"sensor": far}),
+        }
+    )
 
 
 @pytest.fixture(autouse=True)
@@ -95,17 +97,22 @@ def test_interpolation_is_multilinear(model: str, point_mass: Scenario) -> None:
 
     grid = Problem.for_scenario(point_mass, model, (7, 3)).grid
     values = np.random.default_rng(0).random(grid.shape).astype(np.float32)
-    points = np.random.default_rng(1).uniform([a.low for a in grid.axes], [a.high for a in grid.axes], (200, len(grid.axes)))
+    points = np.random.default_rng(1).uniform(
+        [a.low for a in grid.axes], [a.high for a in grid.axes], (200, len(grid.axes))
+    )
     reference = RegularGridInterpolator([a.nodes() for a in grid.axes], values)(points)
     assert np.allclose(grid.interpolate(values, points), reference, atol=1e-5)
     half = len(grid.x_axes)  # several x halves against several y halves of one game, as the players ask
-    pairs = grid.interpolate_pairs(values, points[:6, :half].reshape(2, 3, half), points[6:14, half:].reshape(2, 4, half))
+    pairs = grid.interpolate_pairs(
+        values, points[:6, :half].reshape(2, 3, half), points[6:14, half:].reshape(2, 4, half)
+    )
     for game in range(2):
         for i in range(3):
             for j in range(4):
                 point = np.concatenate([points[3 * game + i, :half], points[6 + 4 * game + j, half:]])
-                assert pairs[game, i, j] == pytest.approx(RegularGridInterpolator(
-                    [a.nodes() for a in grid.axes], values)(point[None])[0], abs=1e-5)
+                assert pairs[game, i, j] == pytest.approx(
+                    RegularGridInterpolator([a.nodes() for a in grid.axes], values)(point[None])[0], abs=1e-5
+                )
 
 
 def test_the_oracles() -> None:
@@ -186,8 +193,9 @@ def test_the_cache_is_reused_and_invalidated(point_mass: Scenario, private_cache
     assert not solve_cached(problem, point_mass.name, force=True)[2]
 
 
-def test_a_solution_file_round_trips_and_refuses_other_games(coarse: Solution, tmp_path: Path,
-                                                             point_mass: Scenario) -> None:
+def test_a_solution_file_round_trips_and_refuses_other_games(
+    coarse: Solution, tmp_path: Path, point_mass: Scenario
+) -> None:
     path = coarse.save(tmp_path / "s.npz")
     loaded = Solution.load(path)
     assert loaded.key == coarse.key and np.array_equal(loaded.values, coarse.values)
@@ -228,8 +236,11 @@ def test_the_hj_pursuer_beats_plain_chase_against_the_hj_evader(arena: Solution,
     """
     seeing = full_observation(point_mass)
     rates = {}
-    for name, pursuer in (("hj", HJPolicy(seeing, "pursuer", arena)), ("chase", Chase(seeing, "pursuer")),
-                          ("pure-pursuit", resolve_policy("pure-pursuit", "pursuer", seeing))):
+    for name, pursuer in (
+        ("hj", HJPolicy(seeing, "pursuer", arena)),
+        ("chase", Chase(seeing, "pursuer")),
+        ("pure-pursuit", resolve_policy("pure-pursuit", "pursuer", seeing)),
+    ):
         result, _ = play_match(seeing, pursuer, HJPolicy(seeing, "evader", arena), episodes=200, seed=1)
         rates[name] = result.capture_rate
     assert rates["hj"] >= 0.95, rates
@@ -271,13 +282,15 @@ def test_the_evader_rates_an_input_by_the_best_outcome_the_pursuers_inputs_leave
 
 
 def test_only_a_value_that_knows_the_walls_rates_the_evaders_inputs_by_their_best_outcome(
-        arena: Solution, coarse: Solution, point_mass: Scenario) -> None:
+    arena: Solution, coarse: Solution, point_mass: Scenario
+) -> None:
     """With rel4d the best-outcome rating made an evader that pure pursuit caught 0.89 instead of 0.54."""
     seeing = full_observation(point_mass)
     rng = np.random.default_rng(0)
     pursuer = rng.uniform(-3.0, 3.0, (256, 2))  # at rest, the evader within 2 m per axis
-    states = np.concatenate([pursuer, np.zeros((256, 2)), pursuer + rng.uniform(-2.0, 2.0, (256, 2)),
-                             np.zeros((256, 2))], axis=1)
+    states = np.concatenate(
+        [pursuer, np.zeros((256, 2)), pursuer + rng.uniform(-2.0, 2.0, (256, 2)), np.zeros((256, 2))], axis=1
+    )
     obs = Game(seeing, n=256).set_state(states)["evader"]
     for solution, best in ((arena, True), (coarse, False)):
         evader = HJPolicy(seeing, "evader", solution)
@@ -286,7 +299,9 @@ def test_only_a_value_that_knows_the_walls_rates_the_evaders_inputs_by_their_bes
         assert evader.best == best
         assert np.array_equal(evader.act(obs), INPUTS[evader_choice(scores, distances, best=best)])
         if best:  # the two ratings differ in some of these games: the check above can fail
-            assert (evader_choice(scores, distances, best=True) != evader_choice(scores, distances, best=False)).sum() > 5
+            assert (
+                evader_choice(scores, distances, best=True) != evader_choice(scores, distances, best=False)
+            ).sum() > 5
 
 
 def test_the_forced_capture_threshold_is_within_the_solutions_horizon(coarse: Solution, point_mass: Scenario) -> None:
@@ -320,8 +335,15 @@ def test_outcomes_are_the_games_own_steps(model: str, coarse: Solution, arena: S
     """The 81 outcomes a player rates, built from 3 + 3 steps per axis, against 81 steps of the game itself."""
     solution = coarse if model == "rel4d" else arena
     rng = np.random.default_rng(3)
-    states = np.concatenate([rng.uniform(-5, 5, (6, 2)), rng.uniform(-2.5, 2.5, (6, 2)),
-                             rng.uniform(-5, 5, (6, 2)), rng.uniform(-2.5, 2.5, (6, 2))], axis=1)
+    states = np.concatenate(
+        [
+            rng.uniform(-5, 5, (6, 2)),
+            rng.uniform(-2.5, 2.5, (6, 2)),
+            rng.uniform(-5, 5, (6, 2)),
+            rng.uniform(-2.5, 2.5, (6, 2)),
+        ],
+        axis=1,
+    )
     states[0, [0, 4]] = [4.95, 4.9]  # both at the right wall
     policy = HJPolicy(point_mass, "pursuer", solution)
     scores, _ = policy.outcomes(states[:, :4].T, states[:, 4:].T)
@@ -331,8 +353,9 @@ def test_outcomes_are_the_games_own_steps(model: str, coarse: Solution, arena: S
         pursuer_inputs, evader_inputs = np.repeat(INPUTS, 9, axis=0), np.tile(INPUTS, (9, 1))
         after = game.step(pursuer_inputs, evader_inputs)
         moved = game.state()
-        expected = solution.grid.interpolate(solution.scores(), solution.grid.points(
-            moved[:, 0:2], moved[:, 2:4], moved[:, 4:6], moved[:, 6:8]))
+        expected = solution.grid.interpolate(
+            solution.scores(), solution.grid.points(moved[:, 0:2], moved[:, 2:4], moved[:, 4:6], moved[:, 6:8])
+        )
         expected[after.captured] = -1.0
         assert np.allclose(scores[k].ravel(), expected, atol=1e-5)
 
@@ -341,8 +364,12 @@ def test_a_flat_score_leaves_the_choice_to_the_distance(coarse: Solution, point_
     """Players separating in the open plane: the closest approach is now whatever they do, so the distance one
     step after the outcome decides: the pursuer closes in, the evader draws away."""
     game = Game(point_mass, n=2)
-    state = np.array([[0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 2.0, 0.0],  # evader 2 m ahead, moving away
-                      [0.0, 0.0, 0.0, 0.0, 0.0, -2.0, 0.0, -2.0]])  # evader 2 m below, moving away
+    state = np.array(
+        [
+            [0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 2.0, 0.0],  # evader 2 m ahead, moving away
+            [0.0, 0.0, 0.0, 0.0, 0.0, -2.0, 0.0, -2.0],
+        ]
+    )  # evader 2 m below, moving away
     obs = game.set_state(state)
     assert np.array_equal(HJPolicy(point_mass, "pursuer", coarse).act(obs["pursuer"]), [[1.0, 0.0], [0.0, -1.0]])
     evader = HJPolicy(point_mass, "evader", coarse).act(obs["evader"])
@@ -371,9 +398,15 @@ def test_an_estimate_the_own_sensor_rules_out_moves_out_of_range(arena: Solution
     """Unseen, the opponent is not within sensing range (3.75 m): the estimate moves to the range's edge, and with
     nothing seen the player only closes in on it (the pursuer) or draws away from it (the evader)."""
     game = Game(point_mass, n=3)
-    obs = game.set_state(np.array([[0.0, 0.0, 0.0, 0.0, 4.5, 4.5, 0.0, 0.0],  # the centre estimate: on the pursuer
-                                   [0.0, 0.0, 0.0, 2.0, -4.5, 4.5, 0.0, 0.0],  # ... moving +y
-                                   [-3.0, 0.0, 0.0, 0.0, -4.5, -4.5, 0.0, 0.0]]))  # the centre, 3 m off: +x
+    obs = game.set_state(
+        np.array(
+            [
+                [0.0, 0.0, 0.0, 0.0, 4.5, 4.5, 0.0, 0.0],  # the centre estimate: on the pursuer
+                [0.0, 0.0, 0.0, 2.0, -4.5, 4.5, 0.0, 0.0],  # ... moving +y
+                [-3.0, 0.0, 0.0, 0.0, -4.5, -4.5, 0.0, 0.0],
+            ]
+        )
+    )  # the centre, 3 m off: +x
     pursuer = HJPolicy(point_mass, "pursuer", arena)
     actions = pursuer.act(obs["pursuer"])
     assert np.allclose(pursuer.opp_state[0:2].T, [[3.75, 0.0], [0.0, 3.75], [0.75, 0.0]])
@@ -383,14 +416,17 @@ def test_an_estimate_the_own_sensor_rules_out_moves_out_of_range(arena: Solution
     assert np.array_equal(actions[0], [1.0, 1.0])  # the centre is out of its range: it draws away from it
 
 
-def test_the_value_rates_only_games_in_which_both_players_see_each_other(arena: Solution,
-                                                                        point_mass: Scenario) -> None:
+def test_the_value_rates_only_games_in_which_both_players_see_each_other(arena: Solution, point_mass: Scenario) -> None:
     """A pursuer that sees 30 m against an evader that sees 3.75 m: beyond 3.75 m the evader plays blind, the
     value's full-information game is not being played, and the distance decides (the pursuer closes in)."""
     far = point_mass.pursuer.sensor.model_copy(update={"range": 30.0})
     scenario = point_mass.model_copy(update={"pursuer": point_mass.pursuer.model_copy(update={"sensor": far})})
-    states = np.array([[0.0, 0.0, 0.0, 0.0, 4.5, 1.0, 0.0, 0.0],  # 4.6 m apart: only the pursuer sees
-                       [0.0, 0.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0]])  # 2.2 m apart: both see
+    states = np.array(
+        [
+            [0.0, 0.0, 0.0, 0.0, 4.5, 1.0, 0.0, 0.0],  # 4.6 m apart: only the pursuer sees
+            [0.0, 0.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0],
+        ]
+    )  # 2.2 m apart: both see
     obs = Game(scenario, n=2).set_state(states)
     pursuer = HJPolicy(scenario, "pursuer", arena)
     pursuer.reset(2)
@@ -404,8 +440,9 @@ def test_the_value_rates_only_games_in_which_both_players_see_each_other(arena: 
     assert list(evader._mutual(evader.codec.decode(obs["evader"]))) == [False, True]
 
 
-def test_empty_and_non_finite_solutions_are_refused_in_one_line(arena: Solution, point_mass: Scenario,
-                                                                tmp_path: Path, private_cache: Path) -> None:
+def test_empty_and_non_finite_solutions_are_refused_in_one_line(
+    arena: Solution, point_mass: Scenario, tmp_path: Path, private_cache: Path
+) -> None:
     empty = tmp_path / "empty.npz"
     empty.write_bytes(b"")
     with pytest.raises(SolutionError, match="empty file"):
@@ -420,9 +457,11 @@ def test_empty_and_non_finite_solutions_are_refused_in_one_line(arena: Solution,
     cached.write_bytes(b"")  # an empty file where the cache expects a solution is solved again
     assert not solve_cached(problem, point_mass.name)[2]
     cached.write_bytes(b"")
-    for args in (["play", "-p", f"hj:{empty}", "-e", "greedy", "-c", "point_mass", "-n", "2"],
-                 ["play", "-p", str(tmp_path / "nan.npz"), "-e", "greedy", "-c", "point_mass", "-n", "2"],
-                 ["hj", "show", str(empty)]):
+    for args in (
+        ["play", "-p", f"hj:{empty}", "-e", "greedy", "-c", "point_mass", "-n", "2"],
+        ["play", "-p", str(tmp_path / "nan.npz"), "-e", "greedy", "-c", "point_mass", "-n", "2"],
+        ["hj", "show", str(empty)],
+    ):
         result = runner.invoke(app, args)
         assert result.exit_code == 1, (args, result.output)
         assert "Traceback" not in result.output and "internal error" not in result.output
@@ -438,18 +477,38 @@ def belief_checkpoint(tmp_path_factory, point_mass: Scenario) -> Path:
     """A tiny BiMDN pursuer trained for a few hundred steps on point_mass.yaml."""
     from pecli.rl.train import TrainJob, train, with_overrides
 
-    scenario = with_overrides(point_mass, {
-        "belief": "bimdn", "steps": 300, "learning_starts": 100, "batch_size": 16, "buffer_size": 500, "n_envs": 2,
-        "net_arch": [16], "belief_settings.warmup": 50, "belief_settings.batch_size": 16,
-        "belief_settings.hidden": 8, "belief_settings.fc": 8, "history_length": 20, "history_stride": 10,
-    })
-    job = TrainJob(role="pursuer", scenario=scenario, opponent="greedy", zoo=tmp_path_factory.mktemp("zoo"),
-                   name="b", progress=False)
+    scenario = with_overrides(
+        point_mass,
+        {
+            "belief": "bimdn",
+            "steps": 300,
+            "learning_starts": 100,
+            "batch_size": 16,
+            "buffer_size": 500,
+            "n_envs": 2,
+            "net_arch": [16],
+            "belief_settings.warmup": 50,
+            "belief_settings.batch_size": 16,
+            "belief_settings.hidden": 8,
+            "belief_settings.fc": 8,
+            "history_length": 20,
+            "history_stride": 10,
+        },
+    )
+    job = TrainJob(
+        role="pursuer",
+        scenario=scenario,
+        opponent="greedy",
+        zoo=tmp_path_factory.mktemp("zoo"),
+        name="b",
+        progress=False,
+    )
     return train(job)
 
 
-def test_a_belief_checkpoint_estimates_the_unseen_opponent(coarse: Solution, point_mass: Scenario, tmp_path: Path,
-                                                          belief_checkpoint: Path) -> None:
+def test_a_belief_checkpoint_estimates_the_unseen_opponent(
+    coarse: Solution, point_mass: Scenario, tmp_path: Path, belief_checkpoint: Path
+) -> None:
     path = coarse.save(tmp_path / "s.npz")
     pursuer = resolve_policy(f"hj:{path},belief={belief_checkpoint}", "pursuer", point_mass)
     assert isinstance(pursuer, HJPolicy) and pursuer.belief is not None

@@ -16,15 +16,28 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 
-TINY = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
-        "--set", "net_arch=[16,16]", "--set", "n_envs=4", "--set", "checkpoint_every=5"]
+TINY = [
+    "--set",
+    "buffer_size=2000",
+    "--set",
+    "batch_size=32",
+    "--set",
+    "learning_starts=100",
+    "--set",
+    "net_arch=[16,16]",
+    "--set",
+    "n_envs=4",
+    "--set",
+    "checkpoint_every=5",
+]
 EVERY = 5  # episodes between checkpoints
 
 
 def pecli(*args: str) -> subprocess.Popen:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    return subprocess.Popen([sys.executable, "-m", "pecli", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "pecli", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    )
 
 
 def kill_when(process: subprocess.Popen, ready, timeout: float = 120.0) -> None:
@@ -76,14 +89,30 @@ def test_train_killed_at_checkpoints_resumes_and_finishes(tmp_path: Path) -> Non
     assert final["steps"] == 2500 and "done:" in output
     assert final["episodes"] > second["episodes"]
     assert sorted(p.name for p in (role / "resume").iterdir() if not p.name.startswith("replay-")) == [
-        "model-000002500.zip", "state.json"]  # the garbage is gone
+        "model-000002500.zip",
+        "state.json",
+    ]  # the garbage is gone
     assert "train pursuer" in (zoo / "k" / "command.txt").read_text()
 
 
 def test_train_killed_before_its_first_checkpoint_starts_over(tmp_path: Path) -> None:
     zoo, run = tmp_path / "zoo", tmp_path / "zoo" / "k"
-    start = ["train", "pursuer", "-c", "quick", "--steps", "4000", "--name", "k", "--zoo", str(zoo), "-q",
-             *TINY[:-2], "--set", "checkpoint_every=1000"]
+    start = [
+        "train",
+        "pursuer",
+        "-c",
+        "quick",
+        "--steps",
+        "4000",
+        "--name",
+        "k",
+        "--zoo",
+        str(zoo),
+        "-q",
+        *TINY[:-2],
+        "--set",
+        "checkpoint_every=1000",
+    ]
     kill_when(pecli(*start), lambda: (run / "run.json").is_file())
     again = CliRunner().invoke(app, ["train", "pursuer", "-c", "quick", "--name", "k", "--zoo", str(zoo), "-q", *TINY])
     assert again.exit_code == 1 and "already exists" in again.output and "--resume" in again.output  # it says how
@@ -94,14 +123,34 @@ def test_train_killed_before_its_first_checkpoint_starts_over(tmp_path: Path) ->
 
 def test_selfplay_killed_inside_a_turn_resumes_there(tmp_path: Path) -> None:
     zoo, run = tmp_path / "zoo", tmp_path / "zoo" / "sp"
-    start = ["selfplay", "-c", "quick", "--rounds", "2", "--steps-per-round", "600", "--name", "sp", "--zoo", str(zoo),
-             "-q", *TINY, "--set", "learning_starts=50"]
+    start = [
+        "selfplay",
+        "-c",
+        "quick",
+        "--rounds",
+        "2",
+        "--steps-per-round",
+        "600",
+        "--name",
+        "sp",
+        "--zoo",
+        str(zoo),
+        "-q",
+        *TINY,
+        "--set",
+        "learning_starts=50",
+    ]
     # killed once the evader has committed part of its round-1 turn (the pursuer's turn is finished)
     kill_when(pecli(*start), lambda: ((committed(run / "evader") or {}).get("extra") or {}).get("round") == 1)
     inside = committed(run / "evader")
     assert inside["steps"] - inside["extra"]["start_steps"] < 600  # killed inside the turn
     finish("selfplay", "--name", "sp", "--zoo", str(zoo), "--resume", "-q")
     state = json.loads((run / "selfplay.json").read_text())
-    assert [(t["round"], t["role"]) for t in state["turns"]] == [(1, "pursuer"), (1, "evader"), (2, "pursuer"), (2, "evader")]
+    assert [(t["round"], t["role"]) for t in state["turns"]] == [
+        (1, "pursuer"),
+        (1, "evader"),
+        (2, "pursuer"),
+        (2, "evader"),
+    ]
     for role in ("pursuer", "evader"):
         assert json.loads((run / role / "round-002.json").read_text())["steps"] == 1200  # the budget, not more

@@ -32,8 +32,11 @@ def _imports(name: str, path: Path) -> set[str]:
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            base = ".".join(package[: len(package) - node.level + 1] + [node.module or ""]).strip(".") \
-                if node.level else node.module or ""
+            base = (
+                ".".join(package[: len(package) - node.level + 1] + [node.module or ""]).strip(".")
+                if node.level
+                else node.module or ""
+            )
             found.add(base)
             found.update(f"{base}.{alias.name}" for alias in node.names)
     return {imported for imported in found if imported == "pecli" or imported.startswith("pecli.")}
@@ -108,6 +111,8 @@ def test_records_load_no_network() -> None:
     import subprocess
     import sys
 
-    code = ("import sys, pecli.records, pecli.rl.state, pecli.experiment.compare; "
-            "assert not {'torch', 'stable_baselines3'} & set(sys.modules), sorted(sys.modules)")
+    code = (
+        "import sys, pecli.records, pecli.rl.state, pecli.experiment.compare; "
+        "assert not {'torch', 'stable_baselines3'} & set(sys.modules), sorted(sys.modules)"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)

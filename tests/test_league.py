@@ -21,9 +21,18 @@ from pecli.scenario import Scenario
 from pecli.zoo import read_metadata
 
 ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")  # pecli's evaders, in every league
-TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
-        "checkpoint_every": 5, "selfplay.rounds": 2, "selfplay.steps_per_round": 240, "selfplay.opponents": "league",
-        "selfplay.exploiter_join": 0.05}
+TINY = {
+    "buffer_size": 2000,
+    "batch_size": 32,
+    "learning_starts": 100,
+    "net_arch": [16, 16],
+    "n_envs": 4,
+    "checkpoint_every": 5,
+    "selfplay.rounds": 2,
+    "selfplay.steps_per_round": 240,
+    "selfplay.opponents": "league",
+    "selfplay.exploiter_join": 0.05,
+}
 
 
 def job(quick: Scenario, zoo: Path) -> SelfPlayJob:
@@ -105,8 +114,16 @@ def test_the_floor_and_the_exploiters_share_cannot_keep_more_than_every_game(qui
 def test_a_main_pursuer_spends_the_exploiters_share_on_them(quick: Scenario, tmp_path: Path) -> None:
     """Round 1's evader exploiter joins (a timeout of one turn); round 2's main pursuer then draws the joined
     exploiters with at least ``league_exploiter_share`` of its weights."""
-    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_share": 0.4, "selfplay.exploiter_join": 1.0,
-                                    "selfplay.league_exploiter_timeout": 1, "selfplay.league_exploiter_roles": ["evader"]})
+    league = with_overrides(
+        quick,
+        {
+            **TINY,
+            "selfplay.league_exploiter_share": 0.4,
+            "selfplay.exploiter_join": 1.0,
+            "selfplay.league_exploiter_timeout": 1,
+            "selfplay.league_exploiter_roles": ["evader"],
+        },
+    )
     SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None).run()
     run = tmp_path / "lg"
     assert [t["joined"] for t in state(run)["turns"] if t["learner"] == "exploiter" and t["round"] == 1] == [True]
@@ -122,13 +139,16 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
     run = tmp_path / "lg"
     turns, pools = state(run)["turns"], state(run)["pools"]
     assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
-        (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter") for role in ("pursuer", "evader")]
+        (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter") for role in ("pursuer", "evader")
+    ]
     assert set(ADVERSARIES) <= {e["name"] for e in pools["evader"]["entries"]}
     assert "interceptor" in {e["name"] for e in pools["pursuer"]["entries"]}
     for t in (t for t in turns if t["learner"] == "exploiter"):
         meta = read_metadata(run / t["checkpoint"])
         assert t["checkpoint"].startswith(f"exploiter-{t['role']}/")
-        assert [o["name"] for o in meta.opponents] == [f"{'evader' if t['role'] == 'pursuer' else 'pursuer'}-r{t['round']:03d}"]
+        assert [o["name"] for o in meta.opponents] == [
+            f"{'evader' if t['role'] == 'pursuer' else 'pursuer'}-r{t['round']:03d}"
+        ]
         in_pool = any(e["spec"] == t["checkpoint"] for e in pools[t["role"]]["entries"])
         assert in_pool == t["joined"]  # only an exploiter that beat the main agent joins
         won = 1 - meta.opponents[0]["opponent_wins"] / max(meta.opponents[0]["episodes"], 1)
@@ -141,25 +161,47 @@ def test_a_league_trains_main_agents_and_exploiters(quick: Scenario, tmp_path: P
     assert "exploiter" in lines[0]
     tensorboard = {str(path.relative_to(run / "tb")) for path in (run / "tb").glob("**/events.out.tfevents.*")}
     assert {path.split("/events")[0] for path in tensorboard} == {
-        "pursuer_0", "evader_0", *(f"exploiter-{role}/r00{r}_0" for role in ("pursuer", "evader") for r in (1, 2))}
+        "pursuer_0",
+        "evader_0",
+        *(f"exploiter-{role}/r00{r}_0" for role in ("pursuer", "evader") for r in (1, 2)),
+    }
 
 
-@pytest.mark.parametrize("every, after, roles, exploited", [
-    (2, 0, ["pursuer", "evader"], (2,)), (0, 0, ["pursuer", "evader"], ()), (1, 1e-6, ["pursuer", "evader"], (2,)),
-    (1, 100, ["pursuer", "evader"], ()), (1, 0, ["evader"], (1, 2))])
+@pytest.mark.parametrize(
+    "every, after, roles, exploited",
+    [
+        (2, 0, ["pursuer", "evader"], (2,)),
+        (0, 0, ["pursuer", "evader"], ()),
+        (1, 1e-6, ["pursuer", "evader"], (2,)),
+        (1, 100, ["pursuer", "evader"], ()),
+        (1, 0, ["evader"], (1, 2)),
+    ],
+)
 def test_the_exploiters_train_every_kth_round_once_the_run_spent_its_cpu_or_never(
-        quick: Scenario, tmp_path: Path, every: int, after: float, roles: list[str], exploited: tuple[int, ...]) -> None:
+    quick: Scenario, tmp_path: Path, every: int, after: float, roles: list[str], exploited: tuple[int, ...]
+) -> None:
     """``after`` CPU-hours: 1e-6 (3.6 ms) is spent by round 1's turns, so round 2 has exploiters; 100 never is.
     ``roles``: the sides that have an exploiter. An exploiter plays the real game: no curriculum."""
-    league = with_overrides(quick, {**TINY, "selfplay.league_exploiter_every": every,
-                                    "selfplay.league_exploiter_after": after, "selfplay.league_exploiter_roles": roles})
+    league = with_overrides(
+        quick,
+        {
+            **TINY,
+            "selfplay.league_exploiter_every": every,
+            "selfplay.league_exploiter_after": after,
+            "selfplay.league_exploiter_roles": roles,
+        },
+    )
     loop = SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lambda line: None)
     loop.run()
     run = tmp_path / "lg"
     turns, pools = state(run)["turns"], state(run)["pools"]
     assert [(t["round"], t["role"], t["learner"]) for t in turns] == [
-        (r, role, kind) for r in (1, 2) for kind in ("main", "exploiter")[:1 + (r in exploited)]
-        for role in ("pursuer", "evader") if kind == "main" or role in roles]
+        (r, role, kind)
+        for r in (1, 2)
+        for kind in ("main", "exploiter")[: 1 + (r in exploited)]
+        for role in ("pursuer", "evader")
+        if kind == "main" or role in roles
+    ]
     assert (run / "exploiter-pursuer").is_dir() == (bool(exploited) and "pursuer" in roles)
     assert set(ADVERSARIES) <= {e["name"] for e in pools["evader"]["entries"]}  # still a league
     assert all(learner.curriculum is not None for learner in loop.learners.values())  # quick.yaml has one
@@ -169,8 +211,9 @@ def test_the_exploiters_train_every_kth_round_once_the_run_spent_its_cpu_or_neve
 def test_an_exploiter_that_does_not_win_joins_at_its_timeout(quick: Scenario, tmp_path: Path) -> None:
     """``exploiter_join: 1``: an exploiter joins by winning every game of its turn, or at the end of its second
     turn since it started afresh (a timeout of 2), and starts afresh after either."""
-    league = with_overrides(quick, {**TINY, "selfplay.rounds": 3, "selfplay.exploiter_join": 1.0,
-                                    "selfplay.league_exploiter_timeout": 2})
+    league = with_overrides(
+        quick, {**TINY, "selfplay.rounds": 3, "selfplay.exploiter_join": 1.0, "selfplay.league_exploiter_timeout": 2}
+    )
     lines: list[str] = []
     SelfPlay(SelfPlayJob(league, tmp_path, "lg", seed=0, progress=False), report=lines.append).run()
     run = tmp_path / "lg"
@@ -212,14 +255,16 @@ def test_join_games_decide_whether_an_exploiter_joins(quick: Scenario, tmp_path:
         target = read_metadata(run / t["checkpoint"]).opponents[0]["spec"]  # the main agent it trained against
         them = resolve_policy(str(run / target), opponent_of(role), league)
         players = (me, them) if role == "pursuer" else (them, me)
-        result, _ = play_match(league, *players, episodes=12,
-                               seed=selfplay_module.turn_seed(0, t["round"], role, "exploiter") + 1)
+        result, _ = play_match(
+            league, *players, episodes=12, seed=selfplay_module.turn_seed(0, t["round"], role, "exploiter") + 1
+        )
         won = result.capture_rate if role == "pursuer" else 1 - result.capture_rate
         assert won == pytest.approx(t["join_rate"], abs=1e-4)
 
     def by_record(t: dict) -> bool:  # what the turn's own games would have decided
         rate = t["captures"] / t["episodes"] if t["episodes"] else float("nan")
         return (rate if t["role"] == "pursuer" else 1 - rate) >= 0.3
+
     assert any(t["joined"] != by_record(t) for t in exploiters)  # with this seed: the join games overrule the record
     assert sum(" in its join games" in line for line in lines) == 2
 
@@ -265,8 +310,16 @@ def test_nash_weights_are_the_mixture_around_the_league_floor() -> None:
 
 
 def test_nash_opponents_play_the_meta_game_and_draw_its_mixture(quick: Scenario, tmp_path: Path) -> None:
-    nash = with_overrides(quick, {**TINY, "selfplay.opponents": "nash", "selfplay.nash_games": 8,
-                                  "selfplay.league_exploiter_every": 0, "selfplay.league_floor": 0.0})
+    nash = with_overrides(
+        quick,
+        {
+            **TINY,
+            "selfplay.opponents": "nash",
+            "selfplay.nash_games": 8,
+            "selfplay.league_exploiter_every": 0,
+            "selfplay.league_floor": 0.0,
+        },
+    )
     SelfPlay(SelfPlayJob(nash, tmp_path, "ps", seed=0, progress=False), report=lambda line: None).run()
     run = tmp_path / "ps"
     record = state(run)

@@ -13,7 +13,9 @@ from pecli.scenario import Scenario
 
 
 def test_metrics_by_hand() -> None:
-    result = MatchResult(captured=np.array([True, True, False, False]), steps=np.array([100, 300, 400, 400]), horizon=400)
+    result = MatchResult(
+        captured=np.array([True, True, False, False]), steps=np.array([100, 300, 400, 400]), horizon=400
+    )
     np.testing.assert_allclose(result.time_to_capture, [0.25, 0.75, 1.0, 1.0])
     assert result.capture_rate == 0.5
     assert result.time_to_capture_mean == pytest.approx(0.75)
@@ -121,11 +123,19 @@ def test_play_behaviour_prints_it_and_joins_the_json() -> None:
 
     from pecli.cli import app
 
-    result = CliRunner().invoke(app, ["play", "-p", "pure-pursuit", "-e", "hider", "-c", "quick", "-n", "8",
-                                      "--behaviour", "--json"])
+    result = CliRunner().invoke(
+        app, ["play", "-p", "pure-pursuit", "-e", "hider", "-c", "quick", "-n", "8", "--behaviour", "--json"]
+    )
     assert result.exit_code == 0, result.output
     record = json.loads(result.stdout)
     assert record["episodes"] == 8 and set(record["behaviour"]) == {
-        "caught", "seen", "sees", "speed_unseen", "speed_seeing", "distance", "wall"}
+        "caught",
+        "seen",
+        "sees",
+        "speed_unseen",
+        "speed_seeing",
+        "distance",
+        "wall",
+    }
     refused = CliRunner().invoke(app, ["play", "-c", "quick", "-n", "20000", "--behaviour"])
     assert refused.exit_code == 1 and "at most 10,000" in refused.output

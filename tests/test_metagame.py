@@ -59,8 +59,28 @@ def test_what_is_no_capture_matrix_is_refused(bad: np.ndarray) -> None:
 def played(tmp_path_factory) -> Path:
     """A tournament of scripted players with --nash, played once for the module."""
     out = tmp_path_factory.mktemp("nash") / "t"
-    result = runner.invoke(app, ["tournament", "pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter",
-                                 "-c", "quick", "-n", "60", "--seeds", "1", "-w", "1", "--out", str(out), "--nash"])
+    result = runner.invoke(
+        app,
+        [
+            "tournament",
+            "pure-pursuit",
+            "interceptor",
+            "greedy",
+            "hider",
+            "corner-sitter",
+            "-c",
+            "quick",
+            "-n",
+            "60",
+            "--seeds",
+            "1",
+            "-w",
+            "1",
+            "--out",
+            str(out),
+            "--nash",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "Nash equilibrium" in result.stdout and f"nash:{out}" in result.output
     return out
@@ -72,8 +92,9 @@ def _tournament(played: Path, tmp_path: Path) -> Path:
     return tmp_path / "t"
 
 
-def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(played: Path, tmp_path: Path,
-                                                                   quick: Scenario) -> None:
+def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(
+    played: Path, tmp_path: Path, quick: Scenario
+) -> None:
     out = _tournament(played, tmp_path)
     record = json.loads((out / "nash.json").read_text())
     weights = {m["name"]: m["weight"] for m in record["pursuer"]}
@@ -81,24 +102,45 @@ def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(played: Path,
     assert set(record["exploitability"]) == {"pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter"}
     mixture = resolve_policy(f"nash:{out}", "evader", quick, seed=0)
     assert sorted(mixture.names) == sorted(m["name"] for m in record["evader"])
-    played = runner.invoke(app, ["play", "-p", f"nash:{out}", "-e", f"nash:{out}/nash.json", "-c", "quick", "-n", "40",
-                                 "--json"])
+    played = runner.invoke(
+        app, ["play", "-p", f"nash:{out}", "-e", f"nash:{out}/nash.json", "-c", "quick", "-n", "40", "--json"]
+    )
     assert played.exit_code == 0, played.output
-    again = runner.invoke(app, ["tournament", f"nash:{out}", "greedy", "-c", "quick", "-n", "40", "--seeds", "1",
-                                "-w", "1", "--out", str(tmp_path / "t2")])
+    again = runner.invoke(
+        app,
+        [
+            "tournament",
+            f"nash:{out}",
+            "greedy",
+            "-c",
+            "quick",
+            "-n",
+            "40",
+            "--seeds",
+            "1",
+            "-w",
+            "1",
+            "--out",
+            str(tmp_path / "t2"),
+        ],
+    )
     assert again.exit_code == 0, again.output  # the mixture takes part in a tournament like any player
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda r: {**r, "scenario_hash": "x"}, "not 'quick'"),
-    (lambda r: {**r, "pursuer": [{"name": "m", "spec": "os:system", "weight": 1.0}]}, "imports no code"),
-    (lambda r: {**r, "pursuer": [{"name": "m", "spec": "nash:elsewhere", "weight": 1.0}]}, "does not nest"),
-    (lambda r: {**r, "value": float("nan")}, "not a Nash mixture"),
-    (lambda r: {**r, "pursuer": []}, "not a Nash mixture"),
-    (lambda r: json.loads("[" * 100_000 + "]" * 100_000), "nested too deep"),
-])
-def test_a_bad_mixture_file_is_refused_in_one_line(played: Path, tmp_path: Path, quick: Scenario, change,
-                                                   message: str) -> None:
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda r: {**r, "scenario_hash": "x"}, "not 'quick'"),
+        (lambda r: {**r, "pursuer": [{"name": "m", "spec": "os:system", "weight": 1.0}]}, "imports no code"),
+        (lambda r: {**r, "pursuer": [{"name": "m", "spec": "nash:elsewhere", "weight": 1.0}]}, "does not nest"),
+        (lambda r: {**r, "value": float("nan")}, "not a Nash mixture"),
+        (lambda r: {**r, "pursuer": []}, "not a Nash mixture"),
+        (lambda r: json.loads("[" * 100_000 + "]" * 100_000), "nested too deep"),
+    ],
+)
+def test_a_bad_mixture_file_is_refused_in_one_line(
+    played: Path, tmp_path: Path, quick: Scenario, change, message: str
+) -> None:
     out = _tournament(played, tmp_path)
     record = json.loads((out / "nash.json").read_text())
     try:
@@ -111,8 +153,9 @@ def test_a_bad_mixture_file_is_refused_in_one_line(played: Path, tmp_path: Path,
 
 
 def test_nash_refuses_a_sampled_tournament(tmp_path: Path) -> None:
-    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "--sample", "1", "--nash",
-                                 "--out", str(tmp_path)])
+    result = runner.invoke(
+        app, ["tournament", "--baselines", "-c", "quick", "--sample", "1", "--nash", "--out", str(tmp_path)]
+    )
     assert result.exit_code == 1 and "--nash needs every pairing" in result.output
 
 

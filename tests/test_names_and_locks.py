@@ -18,8 +18,19 @@ from pecli.scenario import Scenario
 from pecli.zoo import Run, ZooError, check_run_name
 
 runner = CliRunner()
-TINY = ["--set", "learning_starts=4", "--set", "n_envs=2", "--set", "net_arch=[8]", "--set", "buffer_size=100",
-        "--set", "batch_size=4", "-q"]
+TINY = [
+    "--set",
+    "learning_starts=4",
+    "--set",
+    "n_envs=2",
+    "--set",
+    "net_arch=[8]",
+    "--set",
+    "buffer_size=100",
+    "--set",
+    "batch_size=4",
+    "-q",
+]
 BUDGET = {"train": ["--steps", "8"], "selfplay": ["--rounds", "1", "--steps-per-round", "8"]}
 BAD_NAMES = ["../../escape", "../x", "/tmp/anywhere", "a/b", ".", "..", ".hidden", "a b", "x\ny", "é", "-" * 129]
 
@@ -84,7 +95,9 @@ def test_a_run_has_one_writer(tmp_path: Path, quick: Scenario) -> None:
     """A run being written (here by another process that opened it) refuses a resume, a second opener and rm."""
     run = Run.create(tmp_path, "r", quick, {"command": "train", "role": "pursuer", "opponent": "greedy", "seed": 0})
     run.close()
-    holder = hold(tmp_path, "from pathlib import Path; from pecli.zoo import Run; run = Run.open(Path({folder!r}), 'r')")
+    holder = hold(
+        tmp_path, "from pathlib import Path; from pecli.zoo import Run; run = Run.open(Path({folder!r}), 'r')"
+    )
     try:
         assert holder.poll() is None
         with pytest.raises(PecliError, match=rf"run 'r' \(.*\) is being written by process {holder.pid}"):

@@ -117,8 +117,18 @@ def test_wrong_role_and_unknown_names(paper: Scenario) -> None:
         resolve_policy("sneaky", "evader", paper)
     with pytest.raises(PolicyError, match="policy file not found"):
         resolve_policy("zoo/missing.zip", "evader", paper)
-    assert set(BUILTINS) == {"pure-pursuit", "greedy", "random-walk", "rash", "interceptor", "circler", "blindside",
-                             "wall-runner", "hider", "corner-sitter"}
+    assert set(BUILTINS) == {
+        "pure-pursuit",
+        "greedy",
+        "random-walk",
+        "rash",
+        "interceptor",
+        "circler",
+        "blindside",
+        "wall-runner",
+        "hider",
+        "corner-sitter",
+    }
 
 
 @pytest.fixture

@@ -78,8 +78,10 @@ def test_save_and_load_round_trip(quick: Scenario, tmp_path: Path, algo: str, be
             model.policy.critic(tensors(obs), action)[0].numpy(), loaded.policy.critic(tensors(obs), action)[0].numpy()
         )
     if belief != "none":  # the belief network travels in the zip
-        for a, b in zip(model.policy.actor.features_extractor.belief.parameters(),
-                        loaded.policy.actor.features_extractor.belief.parameters()):
+        for a, b in zip(
+            model.policy.actor.features_extractor.belief.parameters(),
+            loaded.policy.actor.features_extractor.belief.parameters(),
+        ):
             assert th.equal(a, b)
 
 

@@ -47,12 +47,15 @@ def rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
 def zoo(tmp_path_factory, quick: Scenario) -> Path:
     """A zoo with one tiny pursuer run: ``zoo/run/pursuer/final.zip``."""
     zoo = tmp_path_factory.mktemp("zoo")
-    scenario = with_overrides(quick, {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [16, 16],
-                                      "n_envs": 2})
+    scenario = with_overrides(
+        quick, {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [16, 16], "n_envs": 2}
+    )
     job = TrainJob(role="pursuer", scenario=scenario, opponent=DEFAULT_OPPONENT["pursuer"], zoo=zoo, name="run")
     model = make_model(job, make_env(job, resolve_policy("greedy", "evader", scenario), seed=0), tensorboard=None)
     model.learn(60)
-    Run.create(zoo, "run", scenario, {"command": "test"}).save(model, "pursuer", "final", checkpoint_meta(job, model, 0))
+    Run.create(zoo, "run", scenario, {"command": "test"}).save(
+        model, "pursuer", "final", checkpoint_meta(job, model, 0)
+    )
     return zoo
 
 
@@ -65,8 +68,10 @@ def poisoned_copy(zoo: Path, tmp_path: Path, marker: Path, entry: str) -> Path:
     with zipfile.ZipFile(path) as archive:
         data = json.loads(archive.read("data"))
     if entry == "data":
-        data["policy_class"] = {":type:": "<class 'type'>",
-                                ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode()}
+        data["policy_class"] = {
+            ":type:": "<class 'type'>",
+            ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode(),
+        }
         rewrite_zip(path, {"data": json.dumps(data).encode()})
     else:
         rewrite_zip(path, {"policy.pth": pickle.dumps(Payload(marker))})
@@ -89,7 +94,17 @@ def test_a_payload_in_data_never_runs(zoo: Path, tmp_path: Path) -> None:
     path = poisoned_copy(zoo, tmp_path, marker, "data")
     for command in (
         ["play", "-p", str(path), "-e", "greedy", "-n", "4"],
-        ["tournament", str(path.parents[2]), "--baselines", "--episodes", "4", "--seeds", "1", "--out", str(tmp_path / "t")],
+        [
+            "tournament",
+            str(path.parents[2]),
+            "--baselines",
+            "--episodes",
+            "4",
+            "--seeds",
+            "1",
+            "--out",
+            str(tmp_path / "t"),
+        ],
         ["export", "onnx", str(path), "--out", str(tmp_path / "exported.onnx")],
         ["zoo", "show", str(path)],
     ):
@@ -104,14 +119,29 @@ def test_a_payload_in_the_weights_is_refused(zoo: Path, tmp_path: Path) -> None:
     result = runner.invoke(app, ["play", "-p", str(path), "-e", "greedy", "-n", "4"])
     assert result.exit_code == 1 and "holds pickled objects" in result.output and "--trust" in result.output
     assert len(result.output.strip().splitlines()) == 1
-    tournament = runner.invoke(app, ["tournament", str(path.parents[2]), "--baselines", "--episodes", "2", "--seeds",
-                                     "1", "--workers", "2", "--out", str(tmp_path / "t")])
+    tournament = runner.invoke(
+        app,
+        [
+            "tournament",
+            str(path.parents[2]),
+            "--baselines",
+            "--episodes",
+            "2",
+            "--seeds",
+            "1",
+            "--workers",
+            "2",
+            "--out",
+            str(tmp_path / "t"),
+        ],
+    )
     assert tournament.exit_code == 1 and "holds pickled objects" in tournament.output  # from a worker process
     assert not marker.exists()
 
 
 def pickled_where_older_pecli_kept_them(path: Path) -> None:
-    """Save the checkpoint again with its classes pickled under the modules an older pecli had (``pecli.rl.policies``)."""
+    """Save the checkpoint again with its classes pickled under the modules an older pecli had
+    (``pecli.rl.policies``)."""
     import sys
     import zipfile
 
@@ -122,8 +152,12 @@ def pickled_where_older_pecli_kept_them(path: Path) -> None:
 
     model = TD3.load(path)  # our own file, written by this test's zoo
     modules = {f"pecli.rl.{m.__name__.rpartition('.')[2]}": m for m in (policies, extractors)}
-    classes = {c: c.__module__ for m in modules.values() for c in vars(m).values()
-               if isinstance(c, type) and c.__module__ == m.__name__}
+    classes = {
+        c: c.__module__
+        for m in modules.values()
+        for c in vars(m).values()
+        if isinstance(c, type) and c.__module__ == m.__name__
+    }
     try:
         for old, module in modules.items():
             sys.modules[old] = module
@@ -137,7 +171,8 @@ def pickled_where_older_pecli_kept_them(path: Path) -> None:
             sys.modules.pop(old, None)
     with zipfile.ZipFile(path) as archive:
         assert b"pecli.rl.policies" in __import__("base64").b64decode(
-            json.loads(archive.read("data"))["policy_class"][":serialized:"])
+            json.loads(archive.read("data"))["policy_class"][":serialized:"]
+        )
 
 
 def test_a_checkpoint_of_an_older_pecli_needs_trust(zoo: Path, tmp_path: Path, monkeypatch) -> None:
@@ -164,19 +199,35 @@ def test_edited_metadata_is_one_clear_line(zoo: Path, tmp_path: Path) -> None:
     meta_path = copy / "run" / "pursuer" / "final.json"
     original = json.loads(meta_path.read_text())
     for change, message in (
-        ({"frame_stack": 5}, "does not describe its network: actor.mu.0.weight has shape [16, 22] in the weights but "
-                             "[16, 55] by the metadata"),
+        (
+            {"frame_stack": 5},
+            "does not describe its network: actor.mu.0.weight has shape [16, 22] in the weights but "
+            "[16, 55] by the metadata",
+        ),
         ({"frame_stack": "two"}, "damaged metadata (frame_stack must be a whole number from 1 to 1000, not 'two')"),
         ({"belief": "bimdn"}, "without its belief_kwargs"),
         ({"algo": "ppo"}, "unknown algorithm 'ppo'"),
         ({"policy_kwargs": {"net_arch": [64, 64]}}, "has shape [16, 22] in the weights but [64, 22] by the metadata"),
     ):
         meta_path.write_text(json.dumps({**original, **change}))
-        for command in (["play", "-p", str(meta_path.with_suffix(".zip")), "-e", "greedy", "-n", "2"],
-                        ["export", "onnx", str(meta_path.with_suffix(".zip")), "--out", str(tmp_path / "x.onnx")],
-                        ["zoo", "show", str(meta_path.with_suffix(".zip"))],
-                        ["tournament", str(meta_path.with_suffix(".zip")), "greedy", "--episodes", "2", "--seeds", "1",
-                         "--workers", "1", "--out", str(tmp_path / "t")]):
+        for command in (
+            ["play", "-p", str(meta_path.with_suffix(".zip")), "-e", "greedy", "-n", "2"],
+            ["export", "onnx", str(meta_path.with_suffix(".zip")), "--out", str(tmp_path / "x.onnx")],
+            ["zoo", "show", str(meta_path.with_suffix(".zip"))],
+            [
+                "tournament",
+                str(meta_path.with_suffix(".zip")),
+                "greedy",
+                "--episodes",
+                "2",
+                "--seeds",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "t"),
+            ],
+        ):
             result = runner.invoke(app, command)
             assert result.exit_code == 1 and message in result.output, (change, command, result.output)
             assert "Traceback" not in result.output and "internal error" not in result.output
@@ -187,8 +238,20 @@ def test_a_payload_in_the_durable_state_is_refused(tmp_path: Path) -> None:
 
     import numpy as np
 
-    tiny = ["--set", "buffer_size=400", "--set", "batch_size=16", "--set", "learning_starts=50", "--set",
-            "net_arch=[16,16]", "--set", "n_envs=2", "--set", "checkpoint_every=2"]
+    tiny = [
+        "--set",
+        "buffer_size=400",
+        "--set",
+        "batch_size=16",
+        "--set",
+        "learning_starts=50",
+        "--set",
+        "net_arch=[16,16]",
+        "--set",
+        "n_envs=2",
+        "--set",
+        "checkpoint_every=2",
+    ]
     start = ["train", "pursuer", "-c", "quick", "--steps", "300", "--name", "r", "--zoo", str(tmp_path), "-q", *tiny]
     assert runner.invoke(app, start).exit_code == 0
     marker = tmp_path / "ran"
@@ -199,14 +262,27 @@ def test_a_payload_in_the_durable_state_is_refused(tmp_path: Path) -> None:
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)
     chunk.write_bytes(buffer.getvalue())
-    result = runner.invoke(app, ["train", "pursuer", "--name", "r", "--zoo", str(tmp_path), "--resume", "-q",
-                                 "--steps", "400"])
+    result = runner.invoke(
+        app, ["train", "pursuer", "--name", "r", "--zoo", str(tmp_path), "--resume", "-q", "--steps", "400"]
+    )
     assert result.exit_code == 1 and "buffer files hold pickled objects" in result.output
     assert not marker.exists()
 
 
-TINY = ["--set", "buffer_size=400", "--set", "batch_size=16", "--set", "learning_starts=50", "--set",
-        "net_arch=[16,16]", "--set", "n_envs=2", "--set", "checkpoint_every=2"]
+TINY = [
+    "--set",
+    "buffer_size=400",
+    "--set",
+    "batch_size=16",
+    "--set",
+    "learning_starts=50",
+    "--set",
+    "net_arch=[16,16]",
+    "--set",
+    "n_envs=2",
+    "--set",
+    "checkpoint_every=2",
+]
 
 
 @pytest.fixture
@@ -218,12 +294,27 @@ def stopped(tmp_path: Path) -> Path:
 
 
 def resume(run: Path, *extra: str):
-    return runner.invoke(app, ["train", "pursuer", "--name", run.name, "--zoo", str(run.parent), "--resume", "-q",
-                               "--steps", "400", *extra])
+    return runner.invoke(
+        app,
+        ["train", "pursuer", "--name", run.name, "--zoo", str(run.parent), "--resume", "-q", "--steps", "400", *extra],
+    )
 
 
-@pytest.mark.parametrize("value, allowed", [("off", None), ("n", None), ("none", None), ("maybe", None), ("0", False),
-                                            ("no", False), ("FALSE", False), ("", False), ("1", True), ("Yes", True)])
+@pytest.mark.parametrize(
+    "value, allowed",
+    [
+        ("off", None),
+        ("n", None),
+        ("none", None),
+        ("maybe", None),
+        ("0", False),
+        ("no", False),
+        ("FALSE", False),
+        ("", False),
+        ("1", True),
+        ("Yes", True),
+    ],
+)
 def test_pecli_trust_takes_exactly_yes_or_no(monkeypatch, value: str, allowed: bool | None) -> None:
     from pecli.errors import PecliError
     from pecli.trust import trusted
@@ -238,8 +329,9 @@ def test_pecli_trust_takes_exactly_yes_or_no(monkeypatch, value: str, allowed: b
 
 def test_a_run_record_that_names_code_imports_nothing(stopped: Path, monkeypatch) -> None:
     marker = stopped.parent / "ran"
-    (stopped.parent / "evil.py").write_text(f"from pathlib import Path\nPath({str(marker)!r}).touch()\n"
-                                            "class Evader: pass\n")
+    (stopped.parent / "evil.py").write_text(
+        f"from pathlib import Path\nPath({str(marker)!r}).touch()\nclass Evader: pass\n"
+    )
     monkeypatch.syspath_prepend(str(stopped.parent))  # as `python -m pecli` puts the working folder on the path
     record = json.loads((stopped / "run.json").read_text())
     (stopped / "run.json").write_text(json.dumps({**record, "opponent": "evil:Evader"}))
@@ -278,8 +370,25 @@ def test_a_lock_file_linked_elsewhere_is_not_written_through(stopped: Path) -> N
     lock = stopped / ".pecli.lock"
     lock.unlink(missing_ok=True)
     lock.symlink_to(victim)
-    result = subprocess.run([sys.executable, "-m", "pecli", "train", "pursuer", "--name", "r", "--zoo",
-                             str(stopped.parent), "--resume", "-q", "--steps", "400"], capture_output=True, text=True)
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pecli",
+            "train",
+            "pursuer",
+            "--name",
+            "r",
+            "--zoo",
+            str(stopped.parent),
+            "--resume",
+            "-q",
+            "--steps",
+            "400",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert result.returncode == 1 and "symbolic link" in result.stderr, result.stderr
     assert victim.read_text() == "keep me\n"
 
@@ -288,9 +397,18 @@ def test_a_selfplay_pool_entry_that_names_code_imports_nothing(quick: Scenario, 
     from pecli.errors import PolicyError
     from pecli.rl.selfplay import SelfPlay, SelfPlayJob
 
-    scenario = with_overrides(quick, {"buffer_size": 400, "batch_size": 16, "learning_starts": 50,
-                                      "net_arch": [16, 16], "n_envs": 2, "selfplay.rounds": 1,
-                                      "selfplay.steps_per_round": 60})
+    scenario = with_overrides(
+        quick,
+        {
+            "buffer_size": 400,
+            "batch_size": 16,
+            "learning_starts": 50,
+            "net_arch": [16, 16],
+            "n_envs": 2,
+            "selfplay.rounds": 1,
+            "selfplay.steps_per_round": 60,
+        },
+    )
     SelfPlay(SelfPlayJob(scenario, tmp_path, "sp", progress=False)).run()
     state_path = tmp_path / "sp" / "selfplay.json"
     state = json.loads(state_path.read_text())
@@ -326,8 +444,19 @@ def test_deeply_nested_records_are_one_clear_line(stopped: Path, tmp_path: Path)
     (stopped / "config.yaml").write_text("a: " + "[" * 20_000 + "]" * 20_000 + "\n")
     with pytest.raises(PecliError, match="nested too deeply"):
         Run(stopped).scenario()
-    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--set", "gamma=" + "[" * 20_000 + "]" * 20_000,
-                                 "--zoo", str(tmp_path / "z")])
+    result = runner.invoke(
+        app,
+        [
+            "train",
+            "pursuer",
+            "-c",
+            "quick",
+            "--set",
+            "gamma=" + "[" * 20_000 + "]" * 20_000,
+            "--zoo",
+            str(tmp_path / "z"),
+        ],
+    )
     assert result.exit_code == 1 and "nested too deeply" in result.output
 
 
@@ -336,12 +465,35 @@ def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Sce
     from pecli.zoo import tournament_ratings
 
     out = tmp_path / "t"
-    args = ["tournament", "--baselines", "-c", "quick", "-n", "20", "--seeds", "1", "-w", "1", "--out", str(out),
-            "--json"]
+    args = [
+        "tournament",
+        "--baselines",
+        "-c",
+        "quick",
+        "-n",
+        "20",
+        "--seeds",
+        "1",
+        "-w",
+        "1",
+        "--out",
+        str(out),
+        "--json",
+    ]
     first = json.loads(runner.invoke(app, args).stdout)
     for cache in (out / "pairings").glob("*.json"):
-        cache.write_text(json.dumps({"pursuer": "x", "evader": "y", "episodes": 0, "captures": 5,
-                                     "time_to_capture_mean": float("nan"), "time_to_capture_std": 1e9}))
+        cache.write_text(
+            json.dumps(
+                {
+                    "pursuer": "x",
+                    "evader": "y",
+                    "episodes": 0,
+                    "captures": 5,
+                    "time_to_capture_mean": float("nan"),
+                    "time_to_capture_std": 1e9,
+                }
+            )
+        )
     again = runner.invoke(app, [*args, "--resume"])
     assert again.exit_code == 0, again.output
     assert json.loads(again.stdout)["pairings"] == first["pairings"]  # played again, the same games
@@ -352,16 +504,20 @@ def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Sce
     assert len(tournament_ratings(tmp_path)) == len(data["ratings"]) - 1
 
 
-@pytest.mark.parametrize("edit, message", [
-    ({"policy_kwargs": {"net_arch": [2147483648], "n_critics": 2}}, "not a list of at most"),
-    ({"policy_kwargs": {"net_arch": [16, 16], "n_critics": 1_000_000}}, "n_critics"),
-    ({"policy_kwargs": {"net_arch": [16] * 100_000, "n_critics": 2}}, "not a list of at most"),
-    ({"policy_kwargs": {"net_arch": [4096, 4096], "n_critics": 2}}, "more than its"),
-    ({"frame_stack": 10**9}, "frame_stack must be a whole number from 1 to 1000"),
-    ({"history_length": 10**12}, "history_length must be"),
-])
-def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(zoo: Path, tmp_path: Path, quick: Scenario,
-                                                                      edit: dict, message: str) -> None:
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        ({"policy_kwargs": {"net_arch": [2147483648], "n_critics": 2}}, "not a list of at most"),
+        ({"policy_kwargs": {"net_arch": [16, 16], "n_critics": 1_000_000}}, "n_critics"),
+        ({"policy_kwargs": {"net_arch": [16] * 100_000, "n_critics": 2}}, "not a list of at most"),
+        ({"policy_kwargs": {"net_arch": [4096, 4096], "n_critics": 2}}, "more than its"),
+        ({"frame_stack": 10**9}, "frame_stack must be a whole number from 1 to 1000"),
+        ({"history_length": 10**12}, "history_length must be"),
+    ],
+)
+def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(
+    zoo: Path, tmp_path: Path, quick: Scenario, edit: dict, message: str
+) -> None:
     from pecli.errors import PolicyError
 
     copy = tmp_path / "zoo"
@@ -373,8 +529,9 @@ def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(zoo: Path
         resolve_policy(str(copy / "run" / "pursuer" / "final.zip"), "pursuer", quick)
 
 
-def test_weights_that_unpack_beyond_the_limit_are_not_read(zoo: Path, tmp_path: Path, quick: Scenario,
-                                                           monkeypatch) -> None:
+def test_weights_that_unpack_beyond_the_limit_are_not_read(
+    zoo: Path, tmp_path: Path, quick: Scenario, monkeypatch
+) -> None:
     from pecli.errors import PolicyError
     from pecli.models import checkpoint
 
@@ -383,10 +540,15 @@ def test_weights_that_unpack_beyond_the_limit_are_not_read(zoo: Path, tmp_path: 
         resolve_policy(str(zoo / "run" / "pursuer" / "final.zip"), "pursuer", quick)
 
 
-@pytest.mark.parametrize("old, new, message", [("fov: 2pi/3", "fov: pi/0", "divides by zero"),
-                                                ("fov: 2pi/3", "fov: " + "9" * 5000, "digits"),
-                                                ("dt: 0.1", "dt: 1e300", "less than or equal to 10"),
-                                                ("width: 8.0", "width: 1e308", "less than or equal to 1000000")])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("fov: 2pi/3", "fov: pi/0", "divides by zero"),
+        ("fov: 2pi/3", "fov: " + "9" * 5000, "digits"),
+        ("dt: 0.1", "dt: 1e300", "less than or equal to 10"),
+        ("width: 8.0", "width: 1e308", "less than or equal to 1000000"),
+    ],
+)
 def test_a_config_that_python_cannot_compute_is_one_line(tmp_path: Path, old: str, new: str, message: str) -> None:
     from pecli.errors import ConfigError
     from pecli.scenario import load_scenario
@@ -397,15 +559,17 @@ def test_a_config_that_python_cannot_compute_is_one_line(tmp_path: Path, old: st
     path.write_text(text.replace(old, new, 1))
     with pytest.raises(ConfigError, match=message):
         load_scenario(path)
-    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000,
-                                 "--zoo", str(tmp_path / "z")])
+    result = runner.invoke(
+        app, ["train", "pursuer", "-c", "quick", "--set", "selfplay.rounds=" + "9" * 5000, "--zoo", str(tmp_path / "z")]
+    )
     assert result.exit_code == 1 and "too many digits" in result.output
 
 
 def test_names_with_markup_print_as_text(tmp_path: Path) -> None:
     zoo = tmp_path / "z[/x]"
-    result = runner.invoke(app, ["train", "pursuer", "-c", "quick", "--steps", "200", "--name", "r", "--zoo", str(zoo),
-                                 "-q", *TINY])
+    result = runner.invoke(
+        app, ["train", "pursuer", "-c", "quick", "--steps", "200", "--name", "r", "--zoo", str(zoo), "-q", *TINY]
+    )
     assert result.exit_code == 0, result.output
     assert "z[/x]" in result.output
 
@@ -419,9 +583,18 @@ def test_a_record_naming_a_file_that_is_not_there_imports_nothing(tmp_path: Path
         with pytest.raises(PolicyError, match="which is not there"):
             recorded_policy("this:x.zip", inside, "a record")
     nash = tmp_path / "nash.json"
-    nash.write_text(json.dumps({"kind": "nash", "scenario": "quick", "scenario_hash": quick.fingerprint(),
-                                "value": 0.5, "pursuer": [{"name": "m", "spec": "this:x.zip", "weight": 1.0}],
-                                "evader": [{"name": "e", "spec": "greedy", "weight": 1.0}]}))
+    nash.write_text(
+        json.dumps(
+            {
+                "kind": "nash",
+                "scenario": "quick",
+                "scenario_hash": quick.fingerprint(),
+                "value": 0.5,
+                "pursuer": [{"name": "m", "spec": "this:x.zip", "weight": 1.0}],
+                "evader": [{"name": "e", "spec": "greedy", "weight": 1.0}],
+            }
+        )
+    )
     with pytest.raises(PolicyError, match="which is not there"):
         resolve_policy(f"nash:{tmp_path}", "pursuer", quick)
     assert resolve_policy(f"nash:{tmp_path}", "evader", quick).names == ["e"]

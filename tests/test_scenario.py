@@ -178,15 +178,25 @@ def test_duplicate_keys_are_refused_with_their_lines(tmp_path: Path) -> None:
 def test_merge_keys_may_override(tmp_path: Path) -> None:
     """YAML's ``<<: *anchor`` merge is not a duplicate: the mapping's own key overrides the merged one."""
     text = (builtin_config_dir() / "quick.yaml").read_text()
-    text = text.replace("evader:\n  kind: point_mass", "evader:\n  <<: &pm {kind: point_mass, v_max: 9.0}\n  kind: point_mass")
+    text = text.replace(
+        "evader:\n  kind: point_mass", "evader:\n  <<: &pm {kind: point_mass, v_max: 9.0}\n  kind: point_mass"
+    )
     assert load_scenario(write(tmp_path, text)).evader.v_max == 1.5
 
 
 @pytest.mark.parametrize(
     ("key", "value", "expected"),
     [
-        ("training.n_envs", 100_000_000, r"training\.n_envs: 100000000 games need ~[\d,]+ GiB; one process steps at most"),
-        ("training.net_arch", [60_000, 60_000, 60_000], r"training\.net_arch: \[60000, 60000, 60000\] need ~[\d,]+ GiB"),
+        (
+            "training.n_envs",
+            100_000_000,
+            r"training\.n_envs: 100000000 games need ~[\d,]+ GiB; one process steps at most",
+        ),
+        (
+            "training.net_arch",
+            [60_000, 60_000, 60_000],
+            r"training\.net_arch: \[60000, 60000, 60000\] need ~[\d,]+ GiB",
+        ),
         ("training.buffer_size", 100_000_000, r"training\.buffer_size: 100000000 transitions need ~[\d,]+ GiB .*limit"),
     ],
 )
@@ -210,11 +220,13 @@ def test_builtins_fit_the_memory_limit(name: str) -> None:
 def test_set_overrides_are_validated_as_strictly_as_files(quick) -> None:
     from pecli.rl.train import parse_overrides, with_overrides
 
-    for item, expected in (("learning_rate=.inf", r"--set: training\.learning_rate: must be a finite number"),
-                           ("learning_rate=nan", "must be a finite number"),
-                           ("n_envs=true", "not the boolean true"),
-                           ("curriculum.enabled=1", "true or false is expected"),
-                           ("n_envs=100000000", "games need")):
+    for item, expected in (
+        ("learning_rate=.inf", r"--set: training\.learning_rate: must be a finite number"),
+        ("learning_rate=nan", "must be a finite number"),
+        ("n_envs=true", "not the boolean true"),
+        ("curriculum.enabled=1", "true or false is expected"),
+        ("n_envs=100000000", "games need"),
+    ):
         with pytest.raises(ConfigError, match=expected):
             with_overrides(quick, parse_overrides([item]))
     assert with_overrides(quick, parse_overrides(["learning_rate=1e-4", "steps=2e4"])).training.steps == 20_000

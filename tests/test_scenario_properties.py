@@ -18,8 +18,11 @@ from pecli.errors import ConfigError
 from pecli.scenario import MEMORY_LIMIT, Scenario, builtin_names, load_scenario, memory_estimate
 
 # 120 examples keep the suite fast; PECLI_HYPOTHESIS_EXAMPLES=5000 searches harder (docs/reliability.md)
-EXAMPLES = settings(max_examples=int(os.environ.get("PECLI_HYPOTHESIS_EXAMPLES", "120")), deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow])
+EXAMPLES = settings(
+    max_examples=int(os.environ.get("PECLI_HYPOTHESIS_EXAMPLES", "120")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 
 
 def full_config(name: str) -> dict[str, Any]:
@@ -30,7 +33,9 @@ def full_config(name: str) -> dict[str, Any]:
 def leaves(data: Any, prefix: tuple = ()) -> list[tuple]:
     """Paths to every value of a nested dict (lists count as values)."""
     if isinstance(data, dict):
-        return [path for key, value in data.items() for path in leaves(value, (*prefix, key))] + ([prefix] if prefix else [])
+        return [path for key, value in data.items() for path in leaves(value, (*prefix, key))] + (
+            [prefix] if prefix else []
+        )
     return [prefix]
 
 
@@ -111,8 +116,10 @@ def test_mutated_text_loads_or_is_refused_in_one_line(folder: Path, data: st.Dat
     lines = lines or yaml.safe_dump(full_config(name), sort_keys=False).splitlines()
     for _ in range(data.draw(st.integers(1, 3), label="edits")):
         valued = [i for i, line in enumerate(lines) if ":" in line and line.split(":", 1)[1].strip()]
-        i = data.draw(st.sampled_from(valued) if valued and data.draw(st.booleans()) else st.integers(0, len(lines) - 1),
-                      label="line")
+        i = data.draw(
+            st.sampled_from(valued) if valued and data.draw(st.booleans()) else st.integers(0, len(lines) - 1),
+            label="line",
+        )
         edit = data.draw(st.sampled_from(["repeat", "remove", "rewrite"]), label="edit")
         if edit == "repeat":
             lines.insert(i, lines[i])
@@ -120,8 +127,30 @@ def test_mutated_text_loads_or_is_refused_in_one_line(folder: Path, data: st.Dat
             del lines[i]
         elif ":" in lines[i]:
             key = lines[i].split(":", 1)[0]
-            text = data.draw(st.sampled_from([".nan", ".inf", "-.inf", "true", "no", "1e400", "1e5", "~", "[]", "{}",
-                                              "1" + "0" * 40, "'12'", "2pi", "0x10", "1_000", "&a 3", "*a", "!!str 5"]),
-                             label="value")
+            text = data.draw(
+                st.sampled_from(
+                    [
+                        ".nan",
+                        ".inf",
+                        "-.inf",
+                        "true",
+                        "no",
+                        "1e400",
+                        "1e5",
+                        "~",
+                        "[]",
+                        "{}",
+                        "1" + "0" * 40,
+                        "'12'",
+                        "2pi",
+                        "0x10",
+                        "1_000",
+                        "&a 3",
+                        "*a",
+                        "!!str 5",
+                    ]
+                ),
+                label="value",
+            )
             lines[i] = f"{key}: {text}"
     check(*load_text(folder, "\n".join(lines) + "\n"))

@@ -27,8 +27,15 @@ from pecli.zoo import read_metadata
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
 runner = CliRunner()
-TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
-        "selfplay.rounds": 2, "selfplay.steps_per_round": 240}
+TINY = {
+    "buffer_size": 2000,
+    "batch_size": 32,
+    "learning_starts": 100,
+    "net_arch": [16, 16],
+    "n_envs": 4,
+    "selfplay.rounds": 2,
+    "selfplay.steps_per_round": 240,
+}
 
 
 def invoke(*args: str):
@@ -167,8 +174,9 @@ def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path,
         state = json.loads((run / role / "resume" / "state.json").read_text())  # the learner's durable state
         assert state["extra"]["round"] == 2 and state["replay"]["added"] > 0
     assert len(lines) == 2 and lines[0].startswith("round 1/2: pursuer captures")
-    p1, e1, p2 = (read_metadata(run / path) for path in ("pursuer/round-001.zip", "evader/round-001.zip",
-                                                         "pursuer/round-002.zip"))
+    p1, e1, p2 = (
+        read_metadata(run / path) for path in ("pursuer/round-001.zip", "evader/round-001.zip", "pursuer/round-002.zip")
+    )
     assert (p1.round, p1.parent, p2.round, p2.parent) == (1, "", 2, "pursuer/round-001.zip")
     assert [o["name"] for o in p1.opponents] == ["greedy", "random-walk", "rash"]  # the baselines
     assert [o["name"] for o in e1.opponents] == ["pure-pursuit", "random-walk", "pursuer-r001"]  # already the new one
@@ -209,8 +217,9 @@ def test_rounds_begun_in_the_curriculum_are_not_averaged(quick: Scenario, tmp_pa
 
 
 @pytest.mark.parametrize("last", [0, 1])
-def test_the_average_spans_average_last_rounds_and_catches_up_on_resume(quick: Scenario, tmp_path: Path,
-                                                                       last: int) -> None:
+def test_the_average_spans_average_last_rounds_and_catches_up_on_resume(
+    quick: Scenario, tmp_path: Path, last: int
+) -> None:
     SelfPlay(job(quick, tmp_path, "sp", **{"selfplay.average_last": last})).run()
     average = tmp_path / "sp" / "pursuer" / "average.zip"
     if last == 0:
@@ -227,8 +236,15 @@ def test_the_average_spans_average_last_rounds_and_catches_up_on_resume(quick: S
     assert read_metadata(average).averaged == [str(tmp_path / "sp" / "pursuer" / "round-002.zip")]
 
 
-BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8, "belief_settings.buffer_size": 400,
-         "belief_settings.warmup": 40, "belief_settings.batch_size": 16, "belief_settings.update_every": 2}
+BIMDN = {
+    "belief": "bimdn",
+    "belief_settings.hidden": 8,
+    "belief_settings.fc": 8,
+    "belief_settings.buffer_size": 400,
+    "belief_settings.warmup": 40,
+    "belief_settings.batch_size": 16,
+    "belief_settings.update_every": 2,
+}
 
 
 @pytest.mark.parametrize("case", ["mid-curriculum", "bimdn", "commit-window"])
@@ -282,10 +298,14 @@ def test_an_interrupted_run_resumes_inside_its_turn(quick: Scenario, tmp_path: P
         final = read_metadata(tmp_path / "sp" / role / "round-002.zip")
         assert final.steps == read_metadata(reference / role / "round-002.zip").steps  # the budget, not more
         if case == "commit-window":
-            assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip"))
+            assert th.equal(
+                parameters(tmp_path / "sp" / role / "round-002.zip"), parameters(reference / role / "round-002.zip")
+            )
         else:  # reproducible from the commit
-            assert th.equal(parameters(tmp_path / "sp" / role / "round-002.zip"),
-                            parameters(tmp_path / "copy" / "sp" / role / "round-002.zip"))
+            assert th.equal(
+                parameters(tmp_path / "sp" / role / "round-002.zip"),
+                parameters(tmp_path / "copy" / "sp" / role / "round-002.zip"),
+            )
     turns = read_state(type("R", (), {"path": tmp_path / "sp", "name": "sp"})()).turns
     assert [(t.round, t.role) for t in turns] == [(1, "pursuer"), (1, "evader"), (2, "pursuer"), (2, "evader")]
 
@@ -318,7 +338,9 @@ def test_the_curriculum_spans_the_first_rounds_for_both_learners(quick: Scenario
     knobs: list[tuple[float, ...]] = []
     loop = SelfPlay(job(quick, tmp_path, "sp", **{"curriculum.fraction": 1.0}))
     games = lambda: [loop.learners[role].env.core.game for role in ("pursuer", "evader")]  # noqa: E731
-    loop.report = lambda line: knobs.append(tuple(x for g in games() for x in (g.fov["pursuer"], g.speed_scale["evader"])))
+    loop.report = lambda line: knobs.append(
+        tuple(x for g in games() for x in (g.fov["pursuer"], g.speed_scale["evader"]))
+    )
     loop.run()
     final = quick.pursuer.sensor.fov
     half = 2 * math.pi + (final - 2 * math.pi) * 0.5
@@ -328,13 +350,29 @@ def test_the_curriculum_spans_the_first_rounds_for_both_learners(quick: Scenario
 
 # -- the command -------------------------------------------------------------------------------
 def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
-    args = ["selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "cli", "--rounds", "1",
-            "--steps-per-round", "120", "--opponents", "uniform", "-q",
-            *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")]]
+    args = [
+        "selfplay",
+        "-c",
+        "quick",
+        "--zoo",
+        str(tmp_path),
+        "--name",
+        "cli",
+        "--rounds",
+        "1",
+        "--steps-per-round",
+        "120",
+        "--opponents",
+        "uniform",
+        "-q",
+        *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")],
+    ]
     result = invoke(*args)
     assert result.exit_code == 0, result.output
     assert "round 1/1" in result.output and (tmp_path / "cli" / "evader" / "round-001.zip").is_file()
-    assert f"to hand over: {tmp_path / 'cli' / 'pursuer' / 'average.zip'} (its last round)" in result.output.replace("\n", "")
+    assert f"to hand over: {tmp_path / 'cli' / 'pursuer' / 'average.zip'} (its last round)" in result.output.replace(
+        "\n", ""
+    )
     assert "already exists" in invoke(*args).output
     common = ["selfplay", "--zoo", str(tmp_path), "--resume", "-q"]
     result = invoke(*common, "--name", "cli", "--opponents", "pfsp")
@@ -355,9 +393,21 @@ def test_the_command_runs_and_refuses_what_it_cannot_do(tmp_path: Path) -> None:
 
 
 def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None:
-    args = ["selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "cpu", "--rounds", "3",
-            "--steps-per-round", "120", "-q",
-            *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")]]
+    args = [
+        "selfplay",
+        "-c",
+        "quick",
+        "--zoo",
+        str(tmp_path),
+        "--name",
+        "cpu",
+        "--rounds",
+        "3",
+        "--steps-per-round",
+        "120",
+        "-q",
+        *[x for key, value in TINY.items() if not key.startswith("selfplay") for x in ("--set", f"{key}={value}")],
+    ]
     state_file = tmp_path / "cpu" / "selfplay.json"
     result = invoke(*args, "--cpu-hours", "1e-9")  # any round reaches it
     assert result.exit_code == 0, result.output
@@ -371,7 +421,9 @@ def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None
     result = invoke(*resume)  # the run keeps its budget
     assert result.exit_code == 0, result.output
     assert (tmp_path / "cpu" / "pursuer" / "average.zip").is_file()  # caught up, with nothing trained
-    assert "nothing to train: a larger --cpu-hours continues the run" in result.output and "to hand over" in result.output
+    assert (
+        "nothing to train: a larger --cpu-hours continues the run" in result.output and "to hand over" in result.output
+    )
     assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
     result = invoke(*resume, "--cpu-hours", "1000")  # a new budget replaces it: on to the ceiling of rounds
     assert result.exit_code == 0 and "round 3/3" in result.output and "budget reached" not in result.output
@@ -382,13 +434,29 @@ def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None
     assert max(t["round"] for t in json.loads(state_file.read_text())["turns"]) == 3
     for bad in ("0", "-1", "nan", "inf", "20000"):
         result = invoke(*resume, "--cpu-hours", bad)
-        assert result.exit_code == 1 and "--cpu-hours must be a number of hours above 0 and at most 10,000" in result.output
+        assert (
+            result.exit_code == 1
+            and "--cpu-hours must be a number of hours above 0 and at most 10,000" in result.output
+        )
 
 
 def test_a_diverging_self_play_stops_without_writing_its_round(tmp_path: Path) -> None:
     sets = {**{k: v for k, v in TINY.items() if not k.startswith("selfplay")}, "learning_rate": "1e30"}
-    result = invoke("selfplay", "-c", "quick", "--zoo", str(tmp_path), "--name", "nan", "--rounds", "1",
-                    "--steps-per-round", "400", "-q", *[x for k, v in sets.items() for x in ("--set", f"{k}={v}")])
+    result = invoke(
+        "selfplay",
+        "-c",
+        "quick",
+        "--zoo",
+        str(tmp_path),
+        "--name",
+        "nan",
+        "--rounds",
+        "1",
+        "--steps-per-round",
+        "400",
+        "-q",
+        *[x for k, v in sets.items() for x in ("--set", f"{k}={v}")],
+    )
     assert result.exit_code == 1 and "training diverged at step" in result.output, result.output
     assert not list((tmp_path / "nan").rglob("*.zip"))
 
@@ -397,11 +465,27 @@ def test_experiment_compare_plays_a_run_against_its_fork(finished: tuple[Path, l
     run, _ = finished
     fork = CliRunner().invoke(app, ["zoo", "fork", str(run), "--to", str(tmp_path / "arm")])
     assert fork.exit_code == 0, fork.output
-    result = CliRunner().invoke(app, ["experiment", "compare", "--arms", f"control={run.parent}",
-                                      "--arms", f"forked={tmp_path / 'arm'}", "-n", "4", "--workers", "1",
-                                      "--out", str(tmp_path / "cmp")])
+    result = CliRunner().invoke(
+        app,
+        [
+            "experiment",
+            "compare",
+            "--arms",
+            f"control={run.parent}",
+            "--arms",
+            f"forked={tmp_path / 'arm'}",
+            "-n",
+            "4",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path / "cmp"),
+        ],
+    )
     assert result.exit_code == 0, result.output
-    rows = [line for line in result.stdout.splitlines() if line.startswith("| control |") or line.startswith("| forked")]
+    rows = [
+        line for line in result.stdout.splitlines() if line.startswith("| control |") or line.startswith("| forked")
+    ]
     assert len(rows) == 2 and all("| sp | 2 |" in row for row in rows)
     assert rows[0].split("|")[4:8] == rows[1].split("|")[4:8]  # the same weights: one player, the same games
     assert "- forked" in result.stdout and "a paired test needs 2 runs" in result.stdout

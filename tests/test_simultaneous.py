@@ -18,10 +18,26 @@ from pecli.scenario import Scenario
 from pecli.zoo import read_metadata
 from wrappers.simultaneous import SimultaneousGame
 
-TINY = {"buffer_size": 2000, "batch_size": 32, "learning_starts": 100, "net_arch": [16, 16], "n_envs": 4,
-        "checkpoint_every": 4, "selfplay.rounds": 2, "selfplay.steps_per_round": 320, "selfplay.schedule": "simultaneous"}
-BIMDN = {"belief": "bimdn", "belief_settings.hidden": 8, "belief_settings.fc": 8, "belief_settings.buffer_size": 400,
-         "belief_settings.warmup": 40, "belief_settings.batch_size": 16, "belief_settings.update_every": 2}
+TINY = {
+    "buffer_size": 2000,
+    "batch_size": 32,
+    "learning_starts": 100,
+    "net_arch": [16, 16],
+    "n_envs": 4,
+    "checkpoint_every": 4,
+    "selfplay.rounds": 2,
+    "selfplay.steps_per_round": 320,
+    "selfplay.schedule": "simultaneous",
+}
+BIMDN = {
+    "belief": "bimdn",
+    "belief_settings.hidden": 8,
+    "belief_settings.fc": 8,
+    "belief_settings.buffer_size": 400,
+    "belief_settings.warmup": 40,
+    "belief_settings.batch_size": 16,
+    "belief_settings.update_every": 2,
+}
 
 
 def job(quick: Scenario, zoo: Path, **overrides) -> SelfPlayJob:
@@ -48,7 +64,9 @@ def test_the_faces_step_the_same_games_once_both_have_acted(quick: Scenario) -> 
     with pytest.raises(RuntimeError, match="both faces must step_async"):
         games.faces["pursuer"].step_wait()
     games.faces["evader"].step_async(-np.ones((3, 2)))
-    (p_obs, p_reward, p_done, _), (e_obs, e_reward, e_done, _) = (games.faces[r].step_wait() for r in ("pursuer", "evader"))
+    (p_obs, p_reward, p_done, _), (e_obs, e_reward, e_done, _) = (
+        games.faces[r].step_wait() for r in ("pursuer", "evader")
+    )
     assert np.array_equal(p_reward, -e_reward) and np.array_equal(p_done, e_done)  # zero-sum, the same games
     assert games.game.t[0] == quick.training.frame_skip  # both held their actions for frame_skip steps
     again = games.faces["pursuer"].reset()  # a new reset, not the old games
@@ -62,8 +80,12 @@ def test_both_learners_learn_from_the_same_steps(quick: Scenario, tmp_path: Path
     run = tmp_path / "sim"
     assert len(lines) == 2 and "pursuer captures" in lines[1]
     turns = read_state(type("R", (), {"path": run, "name": "sim"})()).turns
-    assert [(t.round, t.role, t.steps) for t in turns] == [(1, "pursuer", 320), (1, "evader", 320),
-                                                         (2, "pursuer", 640), (2, "evader", 640)]
+    assert [(t.round, t.role, t.steps) for t in turns] == [
+        (1, "pursuer", 320),
+        (1, "evader", 320),
+        (2, "pursuer", 640),
+        (2, "evader", 640),
+    ]
     for role, other in (("pursuer", "evader"), ("evader", "pursuer")):
         meta = read_metadata(run / role / "round-002.zip")
         assert meta.opponent == "selfplay:simultaneous" and meta.parent == f"{role}/round-001.zip"
@@ -89,6 +111,7 @@ def test_a_round_stopped_inside_resumes_there_the_same_way_twice(quick: Scenario
     def interrupted(models, steps, callbacks):
         calls["n"] += 1
         if calls["n"] == 2:  # round 2, part way
+
             class Stop(schedules_module.EpisodeStats):
                 def _on_step(self) -> bool:
                     if self.num_timesteps > 480:
@@ -111,8 +134,10 @@ def test_a_round_stopped_inside_resumes_there_the_same_way_twice(quick: Scenario
         resumed.resume = True
         SelfPlay(resumed).run()
     for role in ("pursuer", "evader"):
-        ours, theirs = (th.cat([p.flatten() for p in _policy(zoo / "sim" / role / "round-002.zip")])
-                        for zoo in (tmp_path, tmp_path / "copy"))
+        ours, theirs = (
+            th.cat([p.flatten() for p in _policy(zoo / "sim" / role / "round-002.zip")])
+            for zoo in (tmp_path, tmp_path / "copy")
+        )
         assert th.equal(ours, theirs)
         assert read_metadata(run / role / "round-002.zip").steps == 640
 
@@ -125,7 +150,9 @@ def _policy(path: Path) -> list[th.Tensor]:
 
 def test_a_stop_while_committing_counts_the_rounds_cpu_once(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
     ticks = iter(range(1, 1000))  # a CPU clock that advances one second per reading
-    monkeypatch.setattr(schedules_module, "time", type("Clock", (), {"process_time": staticmethod(lambda: next(ticks))}))
+    monkeypatch.setattr(
+        schedules_module, "time", type("Clock", (), {"process_time": staticmethod(lambda: next(ticks))})
+    )
     original = durable_module.DurableState.save
 
     def stopped_once(self, *args, **kwargs):  # Ctrl-C lands while the evader's state is being written

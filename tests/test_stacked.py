@@ -17,8 +17,15 @@ from pecli.rl.train import TrainJob, checkpoint_meta, make_learner, with_overrid
 from pecli.roles import opponent_of
 from pecli.scenario import Scenario
 
-TINY = {"buffer_size": 500, "batch_size": 16, "learning_starts": 50, "net_arch": [32, 32], "n_envs": 6,
-        "belief_settings.hidden": 16, "belief_settings.fc": 8}
+TINY = {
+    "buffer_size": 500,
+    "batch_size": 16,
+    "learning_starts": 50,
+    "net_arch": [32, 32],
+    "n_envs": 6,
+    "belief_settings.hidden": 16,
+    "belief_settings.fc": 8,
+}
 
 
 def members(quick: Scenario, belief: str, count: int, role: str = "evader", **settings) -> list[LearnedPolicy]:
@@ -37,8 +44,10 @@ def play_both(quick: Scenario, players: list, steps: int = 120, games: int = 16)
     one, on the same observations (the one-by-one pool's actions are played; games restart as they end)."""
     role = players[0].role
     names = [f"m{i}" for i in range(len(players))]
-    pools = [MixedPolicy(role, copy.deepcopy(players), names, stack=stack)  # each its own copies: they keep memories
-             for stack in (True, False)]
+    pools = [
+        MixedPolicy(role, copy.deepcopy(players), names, stack=stack)  # each its own copies: they keep memories
+        for stack in (True, False)
+    ]
     game = Game(quick, n=games, seed=3, auto_reset=True)
     obs = game.reset(seed=3)
     for pool in pools:
@@ -85,11 +94,19 @@ def test_a_stacked_pool_plays_as_its_members_one_by_one(quick: Scenario, belief:
 
 
 def test_only_members_of_one_shape_stack_and_the_others_decide_alone(quick: Scenario, monkeypatch) -> None:
-    players = [*members(quick, "none", 6), *members(quick, "bimdn", 6), resolve_policy("greedy", "evader", quick),
-               *members(quick, "bimdn-mixed", 2), *members(quick, "none", 6, net_arch=[16, 16])]
+    players = [
+        *members(quick, "none", 6),
+        *members(quick, "bimdn", 6),
+        resolve_policy("greedy", "evader", quick),
+        *members(quick, "bimdn-mixed", 2),
+        *members(quick, "none", 6, net_arch=[16, 16]),
+    ]
     pool = MixedPolicy("evader", players, [str(i) for i in range(len(players))])
     stacks = {index: id(stack) for index, (stack, _) in pool._stacked.items()}
-    assert sorted(stacks) == [*range(12), *range(15, 21)]  # not the scripted one, nor the mixed belief's sampling actors
+    assert sorted(stacks) == [
+        *range(12),
+        *range(15, 21),
+    ]  # not the scripted one, nor the mixed belief's sampling actors
     assert [len({stacks[i] for i in group}) for group in (range(6), range(6, 12), range(15, 21))] == [1, 1, 1]
     assert len(set(stacks.values())) == 3  # none 32-wide, bimdn, none 16-wide
     assert StackedActors.key(players[12]) is None and StackedActors.key(players[13]) is None

@@ -30,8 +30,10 @@ def test_full_grid_and_sampled_pairings() -> None:
     def player(name: str, role: str) -> Player:
         return Player(name=name, spec=name, role=role, identity=f"file:{name}")
 
-    players = {"pursuer": [player(f"p{i}", "pursuer") for i in range(5)],
-               "evader": [player(f"e{i}", "evader") for i in range(6)]}
+    players = {
+        "pursuer": [player(f"p{i}", "pursuer") for i in range(5)],
+        "evader": [player(f"e{i}", "evader") for i in range(6)],
+    }
     assert len(schedule(players)) == 30
     sampled = schedule(players, sample=2, seed=1)
     assert sampled == schedule(players, sample=2, seed=1)  # seeded
@@ -48,8 +50,15 @@ def test_deterministic_and_cached(quick: Scenario, tmp_path: Path) -> None:
     assert [r.captures for r in first.pairings] == [r.captures for r in second.pairings]
     assert first.pairings[0].episodes == 60
     played: list[bool] = []
-    third = run_tournament(quick, players, pairings, episodes=30, seeds=[0, 1], out=tmp_path / "a",
-                           on_result=lambda result, cached: played.append(cached))
+    third = run_tournament(
+        quick,
+        players,
+        pairings,
+        episodes=30,
+        seeds=[0, 1],
+        out=tmp_path / "a",
+        on_result=lambda result, cached: played.append(cached),
+    )
     assert played == [True, True, True]  # resume skips every done pairing
     assert [r.captures for r in third.pairings] == [r.captures for r in first.pairings]
 
@@ -59,8 +68,15 @@ def test_a_grown_tournament_plays_only_new_pairings(quick: Scenario, tmp_path: P
     small = {"pursuer": players["pursuer"], "evader": players["evader"][:1]}
     run_tournament(quick, small, schedule(small), episodes=20, seeds=[0], out=tmp_path)
     cached: list[bool] = []
-    run_tournament(quick, players, schedule(players), episodes=20, seeds=[0], out=tmp_path,
-                   on_result=lambda result, was_cached: cached.append(was_cached))
+    run_tournament(
+        quick,
+        players,
+        schedule(players),
+        episodes=20,
+        seeds=[0],
+        out=tmp_path,
+        on_result=lambda result, was_cached: cached.append(was_cached),
+    )
     assert sorted(cached) == [False, False, True]
 
 
@@ -119,8 +135,15 @@ def test_a_damaged_cache_entry_is_played_again(quick: Scenario, tmp_path: Path) 
     for entry in (tmp_path / "pairings").iterdir():
         entry.write_text("{truncated")
     cached: list[bool] = []
-    run_tournament(quick, players, pairings, episodes=10, seeds=[0], out=tmp_path,
-                   on_result=lambda result, was_cached: cached.append(was_cached))
+    run_tournament(
+        quick,
+        players,
+        pairings,
+        episodes=10,
+        seeds=[0],
+        out=tmp_path,
+        on_result=lambda result, was_cached: cached.append(was_cached),
+    )
     assert cached == [False]
 
 
@@ -182,8 +205,24 @@ def test_a_killed_tournament_leaves_no_worker_behind(tmp_path: Path, signal_name
 
     out = tmp_path / "t"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
-    command = [sys.executable, "-m", "pecli", "tournament", "--baselines", "stalling:StallingEvader", "-c", "quick",
-               "-n", "4", "--seeds", "1", "--workers", "2", "--out", str(out)]
+    command = [
+        sys.executable,
+        "-m",
+        "pecli",
+        "tournament",
+        "--baselines",
+        "stalling:StallingEvader",
+        "-c",
+        "quick",
+        "-n",
+        "4",
+        "--seeds",
+        "1",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+    ]
     driver = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     children: set[int] = set()
     try:
@@ -214,8 +253,23 @@ def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick:
     holder = hold(out)
     try:
         assert holder.poll() is None  # it holds the lock
-        result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1",
-                                     "--workers", "1", "--out", str(out)])
+        result = runner.invoke(
+            app,
+            [
+                "tournament",
+                "--baselines",
+                "-c",
+                "quick",
+                "-n",
+                "2",
+                "--seeds",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+            ],
+        )
         assert result.exit_code == 1, result.output
         assert f"is being written by process {holder.pid}" in result.output and "tournament output" in result.output
         with pytest.raises(PecliError, match="being written"):
@@ -225,17 +279,36 @@ def test_one_tournament_writes_an_output_folder_at_a_time(tmp_path: Path, quick:
         holder.kill()
         holder.wait()
     # the OS dropped the dead holder's lock: the folder can be written again
-    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1", "--workers", "1",
-                                 "--out", str(out)])
+    result = runner.invoke(
+        app,
+        ["tournament", "--baselines", "-c", "quick", "-n", "2", "--seeds", "1", "--workers", "1", "--out", str(out)],
+    )
     assert result.exit_code == 0, result.output
 
 
 def test_an_impossible_batch_is_refused_before_it_is_allocated(tmp_path: Path) -> None:
-    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-n", "10000000000", "--seeds", "1",
-                                 "-w", "1", "--out", str(tmp_path / "t")])
+    result = runner.invoke(
+        app,
+        [
+            "tournament",
+            "--baselines",
+            "-c",
+            "quick",
+            "-n",
+            "10000000000",
+            "--seeds",
+            "1",
+            "-w",
+            "1",
+            "--out",
+            str(tmp_path / "t"),
+        ],
+    )
     assert result.exit_code == 1 and "more than one batch can play" in result.output
     played = runner.invoke(app, ["play", "-p", "pure-pursuit", "-e", "greedy", "-c", "quick", "-n", "10000000000"])
-    assert played.exit_code == 1 and "more than one batch can play" in played.output and "Traceback" not in played.output
+    assert (
+        played.exit_code == 1 and "more than one batch can play" in played.output and "Traceback" not in played.output
+    )
 
 
 def test_the_heatmap_of_a_small_grid_with_long_names_fits_them(tmp_path: Path) -> None:

@@ -21,8 +21,20 @@ from pecli.rl.callbacks import CurriculumCallback, EpisodeStats, Evaluation
 from pecli.scenario import Scenario
 
 runner = CliRunner()
-TINY = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
-        "--set", "net_arch=[32, 32]", "--set", "checkpoint_every=3", "--set", "n_envs=4"]
+TINY = [
+    "--set",
+    "buffer_size=2000",
+    "--set",
+    "batch_size=32",
+    "--set",
+    "learning_starts=100",
+    "--set",
+    "net_arch=[32, 32]",
+    "--set",
+    "checkpoint_every=3",
+    "--set",
+    "n_envs=4",
+]
 
 
 def invoke(args: list[str]):
@@ -50,9 +62,15 @@ def test_a_run_writes_the_zoo_layout(trained: Path) -> None:
     assert "pecli" in json.loads((run / "versions.json").read_text())
     assert "train pursuer" in (run / "command.txt").read_text()
     role = run / "pursuer"
-    assert (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "resume" / "state.json").is_file()
-    assert json.loads((run / "run.json").read_text()) == {"command": "train", "role": "pursuer", "opponent": "greedy",
-                                                           "seed": 0}
+    assert (
+        (role / "final.zip").is_file() and (role / "last.zip").is_file() and (role / "resume" / "state.json").is_file()
+    )
+    assert json.loads((run / "run.json").read_text()) == {
+        "command": "train",
+        "role": "pursuer",
+        "opponent": "greedy",
+        "seed": 0,
+    }
     periodic = sorted(role.glob("ep*.zip"))
     assert periodic, "expected checkpoints every 3 episodes"
     meta = json.loads((role / "final.json").read_text())
@@ -76,16 +94,23 @@ def test_a_checkpoint_plays_as_a_policy(trained: Path, quick: Scenario) -> None:
 
 def test_a_checkpoint_refuses_another_scenario_or_role(trained: Path, paper: Scenario, quick: Scenario) -> None:
     final = str(trained / "run" / "pursuer" / "final.zip")
-    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'paper' in arena.height 8.0 there, "
-                                          "16.0 here; arena.width 8.0 there, 16.0 here; horizon 150 there, 400 here:"):
+    with pytest.raises(
+        PolicyError,
+        match="trained on 'quick', which differs from 'paper' in arena.height 8.0 there, "
+        "16.0 here; arena.width 8.0 there, 16.0 here; horizon 150 there, 400 here:",
+    ):
         resolve_policy(final, "pursuer", paper)
     longer = quick.model_copy(update={"horizon": 200})  # the same name, another game: say what differs
-    with pytest.raises(PolicyError, match="trained on 'quick', which differs from 'quick' in horizon 150 there, 200 here:"):
+    with pytest.raises(
+        PolicyError, match="trained on 'quick', which differs from 'quick' in horizon 150 there, 200 here:"
+    ):
         resolve_policy(final, "pursuer", longer)
     copy = Path(final).parent.parent.parent / "loose.zip"  # no run config beside it: names and fingerprints
     copy.write_bytes(Path(final).read_bytes())
     copy.with_suffix(".json").write_text(Path(final).with_suffix(".json").read_text())
-    with pytest.raises(PolicyError, match=r"trained on scenario 'quick' \(fingerprint \w+\), another game than 'quick'"):
+    with pytest.raises(
+        PolicyError, match=r"trained on scenario 'quick' \(fingerprint \w+\), another game than 'quick'"
+    ):
         resolve_policy(str(copy), "pursuer", longer)
     with pytest.raises(PolicyError, match="is a pursuer checkpoint; it cannot play evader"):
         resolve_policy(final, "evader", quick)
@@ -134,7 +159,11 @@ def test_overrides_are_read_as_yaml() -> None:
     from pecli.rl.train import parse_overrides
 
     assert parse_overrides(["steps=1e4", "learning_rate=3e-4", "curriculum.enabled=false", "net_arch=[64, 64]"]) == {
-        "steps": 10000, "learning_rate": 3e-4, "curriculum.enabled": False, "net_arch": [64, 64]}
+        "steps": 10000,
+        "learning_rate": 3e-4,
+        "curriculum.enabled": False,
+        "net_arch": [64, 64],
+    }
 
 
 def test_an_existing_run_needs_resume(trained: Path) -> None:
@@ -195,8 +224,12 @@ class _FakeModel:
 def test_curriculum_schedule(paper: Scenario) -> None:
     callback = CurriculumCallback(paper, paper.training.curriculum.span(1000))
     env = callback.model = _FakeModel()  # type: ignore[assignment]
-    for steps, fov, scale in ((0, 2 * math.pi, 0.0), (150, (2 * math.pi + 2 * math.pi / 3) / 2, 0.5), (300, 2 * math.pi / 3, 1.0),
-                              (900, 2 * math.pi / 3, 1.0)):
+    for steps, fov, scale in (
+        (0, 2 * math.pi, 0.0),
+        (150, (2 * math.pi + 2 * math.pi / 3) / 2, 0.5),
+        (300, 2 * math.pi / 3, 1.0),
+        (900, 2 * math.pi / 3, 1.0),
+    ):
         callback.num_timesteps = steps
         callback._apply()
         name, got_fov, got_scale = env.calls[-1]
@@ -220,8 +253,26 @@ def test_a_curriculum_of_fixed_steps_ignores_the_budget(paper: Scenario) -> None
 
 
 def test_evaluations_log_and_keep_the_best_checkpoint(tmp_path: Path) -> None:
-    result = invoke(["train", "pursuer", "-c", "quick", "--zoo", str(tmp_path), "--name", "run", "-q", *TINY,
-                     "--steps", "1200", "--set", "eval_every=300", "--set", "eval_episodes=10"])
+    result = invoke(
+        [
+            "train",
+            "pursuer",
+            "-c",
+            "quick",
+            "--zoo",
+            str(tmp_path),
+            "--name",
+            "run",
+            "-q",
+            *TINY,
+            "--steps",
+            "1200",
+            "--set",
+            "eval_every=300",
+            "--set",
+            "eval_episodes=10",
+        ]
+    )
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader((tmp_path / "run" / "eval_pursuer.csv").open()))
     assert [int(row["steps"]) for row in rows] == [300, 600, 900, 1200]
@@ -262,7 +313,9 @@ def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> No
     from pecli.rl.train import forget_evaluations_after
 
     log = tmp_path / "eval_pursuer.csv"
-    log.write_text("steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n300,3.0,3.0,0.6\n30")
+    log.write_text(
+        "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n300,3.0,3.0,0.6\n30"
+    )
     forget_evaluations_after(log, 200)  # evaluated at 300 after the commit at 200, then killed mid-line
     assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"
 

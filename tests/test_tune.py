@@ -48,8 +48,9 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
     monkeypatch.setattr(tune, "GRACE_S", 1)
     space = write_space(tmp_path, SMALL)
     folder = tmp_path / "tune"
-    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", "--space", str(space), "--trials", "2",
-                                 "--dir", str(folder), *FAST])
+    result = runner.invoke(
+        app, ["tune", "pursuer", "-c", "quick", "--space", str(space), "--trials", "2", "--dir", str(folder), *FAST]
+    )
     assert result.exit_code == 0, result.output
     storage = tune.open_storage(tune.sqlite_url(folder / "studies.db"))
     study = optuna.load_study(study_name="quick-pursuer", storage=storage)
@@ -64,8 +65,9 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
         assert ("action_noise" in trial.params) == (trial.params["algo"] == "td3")
     result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--trials", "2", "--dir", str(folder)])
     assert result.exit_code == 1 and "continue it with --resume" in result.output
-    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--cpu-minutes", "1",
-                                 "--dir", str(folder)])
+    result = runner.invoke(
+        app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--cpu-minutes", "1", "--dir", str(folder)]
+    )
     assert result.exit_code == 1 and "keeps its settings (not --cpu-minutes)" in result.output
     result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--dir", str(folder)])
     assert result.exit_code == 0 and "2 trials of" in result.output  # its own number, not the default 30
@@ -74,8 +76,22 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
     killed = study.ask({"algo": optuna.distributions.CategoricalDistribution(["td3", "sac"])})  # its process died
     storage.record_heartbeat(killed._trial_id)
     time.sleep(2.5)
-    result = runner.invoke(app, ["tune", "pursuer", "--study", "quick-pursuer", "--resume", "--trials", "4",
-                                 "--jobs", "2", "--dir", str(folder)])
+    result = runner.invoke(
+        app,
+        [
+            "tune",
+            "pursuer",
+            "--study",
+            "quick-pursuer",
+            "--resume",
+            "--trials",
+            "4",
+            "--jobs",
+            "2",
+            "--dir",
+            str(folder),
+        ],
+    )
     assert result.exit_code == 0, result.output
     trials = optuna.load_study(study_name="quick-pursuer", storage=storage).get_trials()
     assert len(finished(study)) >= 4  # two processes may overshoot by one
@@ -84,11 +100,14 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
     assert len(retried) == 1 and retried[0].params["algo"] == killed.params["algo"]
     assert retried[0].state in (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
 
-    result = runner.invoke(app, ["tune", "report", "quick-pursuer", "--dir", str(folder), "--profile",
-                                 str(tmp_path / "tuned.yaml")])
+    result = runner.invoke(
+        app, ["tune", "report", "quick-pursuer", "--dir", str(folder), "--profile", str(tmp_path / "tuned.yaml")]
+    )
     assert result.exit_code == 0, result.output
     assert "Best trials" in result.output
-    assert {"report.md", "space.yaml", "history.png", "intermediate.png"} <= {p.name for p in (folder / "quick-pursuer").iterdir()}
+    assert {"report.md", "space.yaml", "history.png", "intermediate.png"} <= {
+        p.name for p in (folder / "quick-pursuer").iterdir()
+    }
     assert yaml.safe_load((folder / "quick-pursuer" / "space.yaml").read_text()) == SMALL
     profile = load_scenario(str(tmp_path / "tuned.yaml"))
     best = optuna.load_study(study_name="quick-pursuer", storage=storage).best_trial
@@ -98,9 +117,16 @@ def test_a_study_runs_persists_resumes_after_a_kill_in_parallel_and_reports(tmp_
 
 
 def settings(quick: Scenario, what: str = "pursuer", **changes: object) -> tune.TuneSettings:
-    values = {"what": what, "scenario": quick.model_dump(mode="json"), "space": SMALL,
-              "opponent": None if what == "selfplay" else "greedy", "eval_opponents": [] if what == "selfplay" else ["greedy"],
-              "cpu_minutes": 0.01, "evaluations": 2, "eval_episodes": 4}
+    values = {
+        "what": what,
+        "scenario": quick.model_dump(mode="json"),
+        "space": SMALL,
+        "opponent": None if what == "selfplay" else "greedy",
+        "eval_opponents": [] if what == "selfplay" else ["greedy"],
+        "cpu_minutes": 0.01,
+        "evaluations": 2,
+        "eval_episodes": 4,
+    }
     return tune.TuneSettings(**{**values, **changes})
 
 
@@ -111,8 +137,9 @@ def test_evaluations_reach_the_pruner(quick: Scenario, tmp_path: Path) -> None:
     assert trial.state == optuna.trial.TrialState.PRUNED and list(trial.intermediate_values) == [1]
 
 
-def test_a_trial_with_repeats_trains_on_each_seed_and_scores_their_mean(quick: Scenario, tmp_path: Path,
-                                                                         monkeypatch) -> None:
+def test_a_trial_with_repeats_trains_on_each_seed_and_scores_their_mean(
+    quick: Scenario, tmp_path: Path, monkeypatch
+) -> None:
     seeds: list[int] = []
     train = tune.Objective._one_role
 
@@ -156,19 +183,24 @@ def test_a_selfplay_runs_reports_take_one_step_per_round_so_the_next_run_never_r
     study = optuna.create_study(direction="maximize")
     study.optimize(objective, n_trials=1)
     steps = study.trials[0].intermediate_values
-    assert steps == pytest.approx({1: 0.2, 2: 0.4, 3: 0.6, 4: 0.8, 5: 0.45, 6: 0.55})  # run 2 from step 5, mean with 0.8
+    assert steps == pytest.approx(
+        {1: 0.2, 2: 0.4, 3: 0.6, 4: 0.8, 5: 0.45, 6: 0.55}
+    )  # run 2 from step 5, mean with 0.8
     assert study.trials[0].value == pytest.approx(0.55)
 
 
 def test_repeats_are_kept_on_resume(tmp_path: Path) -> None:
-    result = runner.invoke(app, ["tune", "pursuer", "--study", "x", "--resume", "--repeats", "2",
-                                 "--dir", str(tmp_path)])
+    result = runner.invoke(
+        app, ["tune", "pursuer", "--study", "x", "--resume", "--repeats", "2", "--dir", str(tmp_path)]
+    )
     assert result.exit_code == 1 and "keeps its settings (not --repeats)" in result.output, result.output
 
 
 def test_a_selfplay_trial_scores_both_sides_after_each_round(quick: Scenario, tmp_path: Path) -> None:
-    space = {"fixed": {**SMALL["fixed"], "selfplay.rounds": 1, "selfplay.steps_per_round": 200,
-                       "curriculum.enabled": False}, "parameters": {"learning_rate": SMALL["parameters"]["learning_rate"]}}
+    space = {
+        "fixed": {**SMALL["fixed"], "selfplay.rounds": 1, "selfplay.steps_per_round": 200, "curriculum.enabled": False},
+        "parameters": {"learning_rate": SMALL["parameters"]["learning_rate"]},
+    }
     study = optuna.create_study(direction="maximize")
     study.optimize(tune.Objective(settings(quick, "selfplay", space=space, eval_episodes=2), tmp_path), n_trials=1)
     trial = study.trials[0]
@@ -177,21 +209,29 @@ def test_a_selfplay_trial_scores_both_sides_after_each_round(quick: Scenario, tm
     assert not any(tmp_path.iterdir())  # the trial's self-play run is scratch
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("parameters: {foo: {type: float, low: 0, high: 1}}", "'foo' is not a training setting"),
-    ("parameters: {learning_rate: {type: float, low: 0, high: 1, log: true}}", "log-scaled parameter needs low > 0"),
-    ("parameters: {learning_rate: {type: float, low: 1}}", "needs low < high"),
-    ("parameters: {learning_rate: {type: flot, low: 1, high: 2}}", "parameters.learning_rate.type"),
-    ("parameters: {algo: {type: categorical, choices: [td3, ppo]}}", "parameters.algo = 'ppo'"),
-    ("parameters: {batch_size: {type: int, low: 0, high: 8}}", "parameters.batch_size = 0"),
-    ("parameters: {tau: {type: float, low: 0.1, high: 0.2, algos: [ppo]}}", "parameters.tau.algos"),
-    ("parameters: {}", "parameters"),
-    ("[1, 2]", "a search space is a mapping"),
-    ("parameters: [", "not valid YAML"),
-    ("parameters: {tau: {type: float, low: 0.1, high: 0.2}, tau: {type: float, low: 0.1, high: 0.3}}",
-     "duplicate key 'tau'"),
-    ("parameters: {tau: {type: float, low: true, high: 0.2}}", "a bound is a number"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("parameters: {foo: {type: float, low: 0, high: 1}}", "'foo' is not a training setting"),
+        (
+            "parameters: {learning_rate: {type: float, low: 0, high: 1, log: true}}",
+            "log-scaled parameter needs low > 0",
+        ),
+        ("parameters: {learning_rate: {type: float, low: 1}}", "needs low < high"),
+        ("parameters: {learning_rate: {type: flot, low: 1, high: 2}}", "parameters.learning_rate.type"),
+        ("parameters: {algo: {type: categorical, choices: [td3, ppo]}}", "parameters.algo = 'ppo'"),
+        ("parameters: {batch_size: {type: int, low: 0, high: 8}}", "parameters.batch_size = 0"),
+        ("parameters: {tau: {type: float, low: 0.1, high: 0.2, algos: [ppo]}}", "parameters.tau.algos"),
+        ("parameters: {}", "parameters"),
+        ("[1, 2]", "a search space is a mapping"),
+        ("parameters: [", "not valid YAML"),
+        (
+            "parameters: {tau: {type: float, low: 0.1, high: 0.2}, tau: {type: float, low: 0.1, high: 0.3}}",
+            "duplicate key 'tau'",
+        ),
+        ("parameters: {tau: {type: float, low: true, high: 0.2}}", "a bound is a number"),
+    ],
+)
 def test_bad_search_spaces_are_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
     space = write_space(tmp_path, text)
     folder = tmp_path / "tune"

@@ -25,13 +25,17 @@ PROCESS_WORDS = [
 
 def process_words(text: str, where: str) -> list[str]:
     """``where:line: the line`` for every line of ``text`` that holds a process word."""
-    return [f"{where}:{number}: {line.strip()}" for number, line in enumerate(text.splitlines(), 1)
-            if any(pattern.search(line) for pattern in PROCESS_WORDS)]
+    return [
+        f"{where}:{number}: {line.strip()}"
+        for number, line in enumerate(text.splitlines(), 1)
+        if any(pattern.search(line) for pattern in PROCESS_WORDS)
+    ]
 
 
 def file_hits(*paths: Path) -> list[str]:
-    return [hit for path in paths for hit in process_words(path.read_text(encoding="utf-8"),
-                                                           str(path.relative_to(ROOT)))]
+    return [
+        hit for path in paths for hit in process_words(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))
+    ]
 
 
 def help_texts() -> dict[str, str]:
@@ -51,18 +55,34 @@ def help_texts() -> dict[str, str]:
     walk(typer.main.get_command(app), [])
     runner, texts = CliRunner(), {}
     for path in paths:
-        result = runner.invoke(app, [*path, "--help"], prog_name="pecli",
-                               env={"COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb"})
+        result = runner.invoke(
+            app, [*path, "--help"], prog_name="pecli", env={"COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb"}
+        )
         assert result.exit_code == 0, (path, result.output)
         texts[" ".join(["pecli", *path, "--help"])] = result.output
     return texts
 
 
 def test_the_checks_catch_what_they_should_and_nothing_else():
-    caught = ["Session 34 trained it", "in this session", "issue 18's targets", "the issue-18 pursuers",
-              "issues 20 and 21", "see #18", "(SPEC §4)", "SPEC section 3"]
-    spared = ["an onnxruntime InferenceSession", "/tmp/ray/session_latest/logs", "a known issue",
-              "&#8217;", "## 18 rounds", "spec.py", "the paper's Table I (section V-B)"]
+    caught = [
+        "Session 34 trained it",
+        "in this session",
+        "issue 18's targets",
+        "the issue-18 pursuers",
+        "issues 20 and 21",
+        "see #18",
+        "(SPEC §4)",
+        "SPEC section 3",
+    ]
+    spared = [
+        "an onnxruntime InferenceSession",
+        "/tmp/ray/session_latest/logs",
+        "a known issue",
+        "&#8217;",
+        "## 18 rounds",
+        "spec.py",
+        "the paper's Table I (section V-B)",
+    ]
     assert all(process_words(text, "t") for text in caught)
     assert not any(process_words(text, "t") for text in spared)
 

@@ -13,8 +13,23 @@ from typer.testing import CliRunner
 from pecli.cli import app
 
 runner = CliRunner()
-TINY = ["--set", "buffer_size=2000", "--set", "batch_size=32", "--set", "learning_starts=100",
-        "--set", "net_arch=[16, 16]", "--set", "checkpoint_every=4", "--set", "n_envs=4", "--steps", "800", "-q"]
+TINY = [
+    "--set",
+    "buffer_size=2000",
+    "--set",
+    "batch_size=32",
+    "--set",
+    "learning_starts=100",
+    "--set",
+    "net_arch=[16, 16]",
+    "--set",
+    "checkpoint_every=4",
+    "--set",
+    "n_envs=4",
+    "--steps",
+    "800",
+    "-q",
+]
 
 
 def invoke(*args: str):
@@ -123,8 +138,10 @@ def test_best_passes_over_a_damaged_checkpoint(zoo: Path, tmp_path: Path) -> Non
     for name, content in (("empty", b""), ("cut", good.read_bytes()[: good.stat().st_size // 2])):
         (run / "pursuer" / f"{name}.zip").write_bytes(content)
         shutil.copy(good.with_suffix(".json"), run / "pursuer" / f"{name}.json")
-    ratings = [{"name": n, "spec": str(run / "pursuer" / f"{n}.zip"), "role": "pursuer", "elo": elo, "stderr": 1.0}
-               for n, elo in (("empty", 1500.0), ("cut", 1400.0), ("final", 1000.0))]
+    ratings = [
+        {"name": n, "spec": str(run / "pursuer" / f"{n}.zip"), "role": "pursuer", "elo": elo, "stderr": 1.0}
+        for n, elo in (("empty", 1500.0), ("cut", 1400.0), ("final", 1000.0))
+    ]
     (tmp_path / "zoo" / "tournament").mkdir()
     (tmp_path / "zoo" / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
     result = invoke("zoo", "best", "pursuer", str(tmp_path / "zoo"))
@@ -165,7 +182,9 @@ def test_average_writes_the_mean_of_a_runs_checkpoints(zoo: Path, tmp_path: Path
     result = invoke("zoo", "average", str(rounds), "--last", "2")
     assert result.exit_code == 0, result.output
     out = rounds / "average-999-1000.zip"  # rounds in their order, not the names' (round-1000 < round-999)
-    a, b, mean = (read_weights(path)[0]["policy"] for path in (rounds / "round-999.zip", rounds / "round-1000.zip", out))
+    a, b, mean = (
+        read_weights(path)[0]["policy"] for path in (rounds / "round-999.zip", rounds / "round-1000.zip", out)
+    )
     key = next(k for k in mean if k.startswith("actor.") and mean[k].is_floating_point())
     assert not a[key].equal(b[key]) and mean[key].allclose((a[key] + b[key]) / 2)
     meta = read_metadata(out)

@@ -163,8 +163,9 @@ def _models_in(annotation: Any) -> list[type]:
     return [m for arg in typing.get_args(annotation) for m in _models_in(arg)]
 
 
-def model_tables(model: type, prefix: str, title: str, anchor: str, level: int, notes: dict[str, str],
-                 documented: dict[type, str]) -> str:
+def model_tables(
+    model: type, prefix: str, title: str, anchor: str, level: int, notes: dict[str, str], documented: dict[type, str]
+) -> str:
     """A table of ``model``'s fields, then a section for each nested model not documented yet (recursively).
 
     Fields that hold the same models (``pursuer`` and ``evader``) share one section, their keys written
@@ -191,9 +192,20 @@ def model_tables(model: type, prefix: str, title: str, anchor: str, level: int, 
         if models:
             links = ", ".join(f"[{label}](#{documented.get(m, a)})" for _, label, m, a in sections if m in models)
             description = (description + "; " if description else "") + f"see {links}"
-        rows.append("| " + " | ".join(_cell(c) for c in (
-            f"`{key}`", _type_name(field.annotation, field.metadata), _default(field),
-            ", ".join(_constraints(field.metadata)), description)) + " |")
+        rows.append(
+            "| "
+            + " | ".join(
+                _cell(c)
+                for c in (
+                    f"`{key}`",
+                    _type_name(field.annotation, field.metadata),
+                    _default(field),
+                    ", ".join(_constraints(field.metadata)),
+                    description,
+                )
+            )
+            + " |"
+        )
     doc = " ".join((model.__doc__ or "").split())
     doc = re.sub(r"``([^`]+)``", r"`\1`", doc) if doc and not doc.startswith("!!!") else ""
     out = [f"{'#' * level} {title} {{#{anchor}}}\n", f"{doc}\n" if doc else "", "\n".join(rows), ""]
@@ -252,8 +264,10 @@ def scenario_fields() -> str:
 def experiment_fields() -> str:
     from pecli.experiment.spec import Experiment
 
-    extends = ("\n`extends` (string, optional): a built-in experiment's name, or a YAML file relative to this one, "
-               "whose keys this file starts from; see [Variants](#variants-extends).\n")
+    extends = (
+        "\n`extends` (string, optional): a built-in experiment's name, or a YAML file relative to this one, "
+        "whose keys this file starts from; see [Variants](#variants-extends).\n"
+    )
     return model_tables(Experiment, "", "Top level", "experiment-top", 3, EXPERIMENT_NOTES, {}) + extends
 
 
@@ -269,9 +283,21 @@ def builtin_scenarios() -> str:
             sight = f"{agent.sensor.range:g} m" + ("" if fov >= 360 else f", {fov}°")
             return f"{agent.kind.replace('_', ' ')} (sensor {sight})"
 
-        rows.append("| " + " | ".join(_cell(c) for c in (
-            f"`{name}`", player(s.pursuer), player(s.evader), f"{s.arena.width:g} m × {s.arena.height:g} m",
-            str(s.horizon), s.description)) + " |")
+        rows.append(
+            "| "
+            + " | ".join(
+                _cell(c)
+                for c in (
+                    f"`{name}`",
+                    player(s.pursuer),
+                    player(s.evader),
+                    f"{s.arena.width:g} m × {s.arena.height:g} m",
+                    str(s.horizon),
+                    s.description,
+                )
+            )
+            + " |"
+        )
     return "\n".join(rows) + "\n"
 
 
@@ -279,12 +305,15 @@ def builtin_experiments() -> str:
     from pecli.experiment.spec import builtin_experiments as names
     from pecli.experiment.spec import load_experiment
 
-    rows = ["| name | scenario | grid (kinds × seeds × schedules) | budget per run | description |",
-            "| --- | --- | --- | --- | --- |"]
+    rows = [
+        "| name | scenario | grid (kinds × seeds × schedules) | budget per run | description |",
+        "| --- | --- | --- | --- | --- |",
+    ]
     for name in names():
         spec = load_experiment(name).spec
         runs = spec.runs
-        grid = f"{', '.join(runs.kinds)} × {len(runs.seeds)} seed{'s' * (len(runs.seeds) > 1)} × {', '.join(runs.schedules)}"
+        seeds = f"{len(runs.seeds)} seed{'s' * (len(runs.seeds) > 1)}"
+        grid = f"{', '.join(runs.kinds)} × {seeds} × {', '.join(runs.schedules)}"
         if runs.cpu_hours is not None:
             budget = f"{runs.cpu_hours:g} CPU-h"
         elif runs.rounds is not None:
@@ -293,8 +322,11 @@ def builtin_experiments() -> str:
             budget = f"{runs.steps:,} transitions".replace(",", " ")
         else:
             budget = "the scenario's"
-        rows.append("| " + " | ".join(_cell(c) for c in (
-            f"`{name}`", f"`{spec.scenario}`", grid, budget, spec.description)) + " |")
+        rows.append(
+            "| "
+            + " | ".join(_cell(c) for c in (f"`{name}`", f"`{spec.scenario}`", grid, budget, spec.description))
+            + " |"
+        )
     return "\n".join(rows) + "\n"
 
 
@@ -325,5 +357,3 @@ _ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|attr|data|obj|exc|const):(<
 
 def on_page_content(html: str, page: Any, config: Any, files: Any) -> str:
     return _ROLE.sub(r"\1", html)
-
-

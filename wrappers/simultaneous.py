@@ -126,8 +126,9 @@ class SimultaneousGame:
         for role in ROLES:
             self.sides[role].stack.push(result.obs[role])
         self._return += reward
-        infos: dict[Role, list[dict[str, Any]]] = {role: [{"TimeLimit.truncated": False} for _ in range(self.n)]
-                                                  for role in ROLES}
+        infos: dict[Role, list[dict[str, Any]]] = {
+            role: [{"TimeLimit.truncated": False} for _ in range(self.n)] for role in ROLES
+        }
         if done.any():
             ended = np.flatnonzero(done)
             for role in ROLES:
@@ -144,8 +145,10 @@ class SimultaneousGame:
             for role in ROLES:
                 self.sides[role].restart(fresh[role], mask=done)
         scaled = (reward * self.training.reward_scale).astype(np.float32)
-        return {role: (self.sides[role].observation(), scaled if role == "pursuer" else -scaled, done.copy(),
-                       infos[role]) for role in ROLES}
+        return {
+            role: (self.sides[role].observation(), scaled if role == "pursuer" else -scaled, done.copy(), infos[role])
+            for role in ROLES
+        }
 
 
 class SideVecEnv(DelegatingVecEnv):

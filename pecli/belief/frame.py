@@ -44,7 +44,8 @@ class BeliefFrame(nn.Module):
         self.heading_index = codec.own.labels.index("psi") if codec.own.has_heading else None
 
     def forward(self, points: th.Tensor, newest: th.Tensor) -> th.Tensor:
-        """``points`` ``(B, 2)`` or ``(B, S, 2)`` seen from the observer of ``newest`` ``(B, dim)``, a normalised row."""
+        """``points`` ``(B, 2)`` or ``(B, S, 2)`` seen from the observer of ``newest`` ``(B, dim)``,
+        a normalised row."""
         if self.frame == "world":
             return points
         shape = (-1,) + (1,) * (points.dim() - 2)  # broadcast a per-row number over the points

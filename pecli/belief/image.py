@@ -40,7 +40,10 @@ def rasterise(window: DecodedWindow, decoder: WindowDecoder, grid: int = GRID) -
     covered &= window.valid[..., None]
     image = np.zeros((batch, 3, grid * grid), dtype=np.float32)
     image[:, 0] = (covered * recency).max(axis=1)
-    for channel, positions, present in ((1, window.opp_pos, window.seen & window.valid), (2, window.own_pos, window.valid)):
+    for channel, positions, present in (
+        (1, window.opp_pos, window.seen & window.valid),
+        (2, window.own_pos, window.valid),
+    ):
         col = np.clip(((positions[..., 0] + 1.0) / 2.0 * grid).astype(np.int64), 0, grid - 1)
         row = np.clip(((positions[..., 1] + 1.0) / 2.0 * grid).astype(np.int64), 0, grid - 1)
         cells = row * grid + col  # (B, T)
@@ -57,9 +60,15 @@ class ImageBelief(nn.Module):
         self.decoder = decoder
         self.grid = grid
         self.cnn = nn.Sequential(
-            nn.Conv2d(3, 16, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
-            nn.Conv2d(16, 32, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
-            nn.Flatten(), nn.Linear(32 * (grid // 4) ** 2, fc), nn.ReLU(),
+            nn.Conv2d(3, 16, 3, padding=1),
+            nn.ReLU(),
+            nn.MaxPool2d(2),
+            nn.Conv2d(16, 32, 3, padding=1),
+            nn.ReLU(),
+            nn.MaxPool2d(2),
+            nn.Flatten(),
+            nn.Linear(32 * (grid // 4) ** 2, fc),
+            nn.ReLU(),
         )
         self.head = MixtureHead(fc, components)
 

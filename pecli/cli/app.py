@@ -51,8 +51,11 @@ def _root(
     ] = False,
     trust: Annotated[
         bool,
-        typer.Option("--trust", help="Allow unpickling files that need it (checkpoints of an older pecli): only for "
-                     "files from a source you trust, as unpickling runs any code in them. Same as PECLI_TRUST=1."),
+        typer.Option(
+            "--trust",
+            help="Allow unpickling files that need it (checkpoints of an older pecli): only for "
+            "files from a source you trust, as unpickling runs any code in them. Same as PECLI_TRUST=1.",
+        ),
     ] = False,
 ) -> None:
     """Pursuit-evasion between car-like robots with limited sensors (Gonultas & Isler).
@@ -92,8 +95,13 @@ def reflow(doc: str) -> str:
     """A docstring with each paragraph's lines joined (paragraphs stay apart): typer's rich help keeps line
     breaks, so text wrapped for the source would come out ragged at the terminal's width."""
     paragraphs = inspect.cleandoc(doc).split("\n\n")
-    return "\n\n".join(paragraph if paragraph.startswith("\b") else  # click's mark: keep this one's lines
-                         " ".join(line.strip() for line in paragraph.splitlines()) for paragraph in paragraphs)
+    return "\n\n".join(
+        paragraph
+        if paragraph.startswith("\b")
+        # click's mark: keep this one's lines
+        else " ".join(line.strip() for line in paragraph.splitlines())
+        for paragraph in paragraphs
+    )
 
 
 def _reflow_help(typer_app: typer.Typer) -> None:

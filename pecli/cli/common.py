@@ -97,8 +97,9 @@ def user_errors(command: F) -> F:
             raise typer.Exit(code=1) from None
         except OSError as exc:  # an unwritable output, a full disk, a path that is not there
             where = f"{exc.filename}: " if exc.filename else ""
-            err_console.print(f"[bold red]error:[/] {escape(f'{where}{exc.strerror or exc}')}", highlight=False,
-                              soft_wrap=True)
+            err_console.print(
+                f"[bold red]error:[/] {escape(f'{where}{exc.strerror or exc}')}", highlight=False, soft_wrap=True
+            )
             raise typer.Exit(code=1) from None
         except Exception as exc:
             if os.environ.get(DEBUG_VARIABLE):
@@ -127,8 +128,10 @@ def require_batch(episodes: int, hint: str) -> int:
 
     require_positive(episodes, "--episodes")
     if episodes > MAX_EPISODES:
-        raise PecliError(f"--episodes {episodes} is more than one batch can play (at most {MAX_EPISODES:,} at once, "
-                         f"about 1.5 KiB each): {hint}")
+        raise PecliError(
+            f"--episodes {episodes} is more than one batch can play (at most {MAX_EPISODES:,} at once, "
+            f"about 1.5 KiB each): {hint}"
+        )
     return episodes
 
 

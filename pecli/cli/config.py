@@ -23,8 +23,14 @@ def list_configs() -> None:
         table.add_column(column)
     for name in builtin_names():
         s = load_scenario(name)
-        table.add_row(name, s.pursuer.kind, s.evader.kind, f"{s.arena.width:g} x {s.arena.height:g} m",
-                      str(s.horizon), s.description)
+        table.add_row(
+            name,
+            s.pursuer.kind,
+            s.evader.kind,
+            f"{s.arena.width:g} x {s.arena.height:g} m",
+            str(s.horizon),
+            s.description,
+        )
     console.print(table)
 
 

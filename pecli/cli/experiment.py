@@ -34,8 +34,15 @@ app = typer.Typer(
     no_args_is_help=True,
 )
 
-STATUS_STYLE = {"done": "green", "running": "cyan", "failed": "red", "stopped": "yellow", "paused": "yellow",
-                "queued": "dim", "pending": "dim"}
+STATUS_STYLE = {
+    "done": "green",
+    "running": "cyan",
+    "failed": "red",
+    "stopped": "yellow",
+    "paused": "yellow",
+    "queued": "dim",
+    "pending": "dim",
+}
 
 
 def _minutes(seconds: float) -> str:
@@ -52,8 +59,9 @@ def progress_line(rows: list[RunStatus]) -> str:
     left, unknown = training_left([(row.run, row.progress) for row in rows])
     estimate = ""
     if done < len(rows) and unknown < len(rows) - done:
-        estimate = (f"; about {left / 3600:.1f} CPU-hours left, by the finished runs of each kind"
-                    + (f" ({unknown} runs of kinds not finished yet not counted)" if unknown else ""))
+        estimate = f"; about {left / 3600:.1f} CPU-hours left, by the finished runs of each kind" + (
+            f" ({unknown} runs of kinds not finished yet not counted)" if unknown else ""
+        )
     return f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training{estimate}"
 
 
@@ -75,12 +83,23 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
         table.add_column("host", no_wrap=True)
     for row in rows:
         p = row.progress
-        where = f"{p.round}/{p.rounds}" + (f" {p.role}" if p.role and row.status == "running" else "") if p.rounds else "-"
+        where = (
+            f"{p.round}/{p.rounds}" + (f" {p.role}" if p.role and row.status == "running" else "") if p.rounds else "-"
+        )
         status = f"[{STATUS_STYLE.get(row.status, '')}]{row.status}[/]"
         if row.error:
             status += f": {row.error}"
-        cells = [row.run.name, row.run.kind, str(row.run.seed), *([row.run.schedule] if schedules else []), where,
-                 f"{p.steps:,}", _minutes(p.cpu_seconds), status, *([row.host] if hosts else [])]
+        cells = [
+            row.run.name,
+            row.run.kind,
+            str(row.run.seed),
+            *([row.run.schedule] if schedules else []),
+            where,
+            f"{p.steps:,}",
+            _minutes(p.cpu_seconds),
+            status,
+            *([row.host] if hosts else []),
+        ]
         table.add_row(*cells)
     return table
 
@@ -88,23 +107,38 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
 @app.command()
 @user_errors
 def run(
-    experiment: Annotated[str, typer.Argument(help=f"A built-in experiment ({', '.join(builtin_experiments())}) "
-                                              "or a YAML file.", show_default=False)],
+    experiment: Annotated[
+        str,
+        typer.Argument(
+            help=f"A built-in experiment ({', '.join(builtin_experiments())}) or a YAML file.", show_default=False
+        ),
+    ],
     address: Annotated[
         str | None,
-        typer.Option("--address", help="Join a running Ray cluster: auto, HOST:PORT or ray://HOST:PORT "
-                     "(default: start Ray on this machine). Every node must see --out at the same path."),
+        typer.Option(
+            "--address",
+            help="Join a running Ray cluster: auto, HOST:PORT or ray://HOST:PORT "
+            "(default: start Ray on this machine). Every node must see --out at the same path.",
+        ),
     ] = None,
-    cpus: Annotated[int | None, typer.Option("--cpus", help="Workers of the embedded Ray (default: all cores).")] = None,
-    out: Annotated[Path | None, typer.Option("--out", help="The experiment's folder (default: "
-                                             "runs/experiments/<name>); run again on it to continue.")] = None,
+    cpus: Annotated[
+        int | None, typer.Option("--cpus", help="Workers of the embedded Ray (default: all cores).")
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="The experiment's folder (default: runs/experiments/<name>); run again on it to continue."
+        ),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live table.")] = False,
     until_cpu_hours: Annotated[
         float | None,
-        typer.Option("--until-cpu-hours",
-                     help="Train each self-play run only until it has used this many CPU-hours (at most its own "
-                     "budget); while any run is short of its own budget, stop before the ranking: every run at "
-                     "an equal budget first."),
+        typer.Option(
+            "--until-cpu-hours",
+            help="Train each self-play run only until it has used this many CPU-hours (at most its own "
+            "budget); while any run is short of its own budget, stop before the ranking: every run at "
+            "an equal budget first.",
+        ),
     ] = None,
 ) -> None:
     """Run an experiment: train its runs, rank their checkpoints, play the tournament, write the report.
@@ -123,8 +157,11 @@ def run(
 
     loaded = load_experiment(experiment)
     out = out or Path("runs/experiments") / loaded.name
-    live = Live(console=err_console, refresh_per_second=2, transient=False,
-                auto_refresh=True) if not quiet and err_console.is_terminal else None
+    live = (
+        Live(console=err_console, refresh_per_second=2, transient=False, auto_refresh=True)
+        if not quiet and err_console.is_terminal
+        else None
+    )
     title = f"experiment {loaded.name} in {out}"
     last_stage = ""
 
@@ -149,31 +186,43 @@ def run(
             live.start()
         with cluster:
             signal.signal(signal.SIGTERM, interrupt)  # again: ray.init installed a handler of its own
-            where = (f"embedded Ray, {cluster.total_cpus()} CPUs" if cluster.embedded else
-                     f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs")
-            err_console.print(f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; "
-                              f"output in {out}", highlight=False)
+            where = (
+                f"embedded Ray, {cluster.total_cpus()} CPUs"
+                if cluster.embedded
+                else f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs"
+            )
+            err_console.print(
+                f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; output in {out}",
+                highlight=False,
+            )
             report = runner.run(cluster)
     except KeyboardInterrupt:
         if live is not None:
             live.stop()
-        err_console.print(f"[yellow]interrupted[/]: finished runs and pairings are saved, unfinished runs continue "
-                          f"from their last checkpoint: {again}", highlight=False)
+        err_console.print(
+            f"[yellow]interrupted[/]: finished runs and pairings are saved, unfinished runs continue "
+            f"from their last checkpoint: {again}",
+            highlight=False,
+        )
         raise typer.Exit(code=130) from None
     finally:
         if live is not None:
             live.stop()
         stack.close()
     session = runner.session
-    err_console.print(f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
-                      f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",
-                      highlight=False)
+    err_console.print(
+        f"runs: {session.runs_started} started, {session.runs_resumed} resumed, {session.runs_skipped} "
+        f"finished before; pairings: {session.pairings_played} played, {session.pairings_cached} cached",
+        highlight=False,
+    )
     if report is None:  # paused at --until-cpu-hours
         if live is None:
             console.print(runs_table(runner.rows, f"experiment {loaded.name} in {out}"))
-        err_console.print(f"[yellow]paused[/]: every self-play run has trained to {until_cpu_hours:g} CPU-h or "
-                          f"its own budget; the ranking waits for all of them: {again} [--until-cpu-hours H]",
-                          highlight=False)
+        err_console.print(
+            f"[yellow]paused[/]: every self-play run has trained to {until_cpu_hours:g} CPU-h or "
+            f"its own budget; the ranking waits for all of them: {again} [--until-cpu-hours H]",
+            highlight=False,
+        )
         return
     _print_report(out)
     err_console.print(f"wrote {report}, {out / 'report.json'}, {out / 'table.png'}", highlight=False)
@@ -182,10 +231,15 @@ def run(
 @app.command()
 @user_errors
 def show(
-    experiment: Annotated[str, typer.Argument(help=f"A built-in experiment ({', '.join(builtin_experiments())}) "
-                                              "or a YAML file.", show_default=False)],
+    experiment: Annotated[
+        str,
+        typer.Argument(
+            help=f"A built-in experiment ({', '.join(builtin_experiments())}) or a YAML file.", show_default=False
+        ),
+    ],
 ) -> None:
-    """Print an experiment as it will run (a base it extends merged in), its fingerprint and its runs; trains nothing."""
+    """Print an experiment as it will run (a base it extends merged in), its fingerprint and its runs;
+    trains nothing."""
     import yaml
 
     from pecli.experiment import load_experiment
@@ -198,7 +252,9 @@ def show(
 
 @app.command()
 @user_errors
-def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
+def status(
+    out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)],
+) -> None:
     """Show every run of an experiment (kind, seed, round, CPU time, status) and its stages."""
     from pecli.experiment.folder import (
         driver_alive,
@@ -221,7 +277,9 @@ def status(out: Annotated[Path, typer.Argument(help="The experiment's folder (it
 
 @app.command()
 @user_errors
-def report(out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)]) -> None:
+def report(
+    out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)],
+) -> None:
     """Write the experiment's report again (report.md, report.json, table.png) and print its table."""
     from pecli.experiment.report import write_report
 
@@ -240,14 +298,31 @@ def _print_report(out: Path) -> None:
 @app.command()
 @user_errors
 def compare(
-    arms: Annotated[list[str], typer.Option("--arms", help="LABEL=ZOO for each arm, the control first (repeat, or "
-                                            "one arm for a zoo's strength table).", show_default=False)],
+    arms: Annotated[
+        list[str],
+        typer.Option(
+            "--arms",
+            help="LABEL=ZOO for each arm, the control first (repeat, or one arm for a zoo's strength table).",
+            show_default=False,
+        ),
+    ],
     config: PlayersConfigOption = None,
     episodes: Annotated[int, typer.Option("--episodes", "-n", min=1, help="Games per pairing.")] = 500,
-    cpu_hours: Annotated[float | None, typer.Option("--cpu-hours", help="Every run at this CPU budget (default: each "
-                                                    "run's newest round).", show_default=False)] = None,
-    at_round: Annotated[int | None, typer.Option("--round", min=1, help="Every run after this many rounds (equal "
-                                                 "transitions per main learner, not CPU).", show_default=False)] = None,
+    cpu_hours: Annotated[
+        float | None,
+        typer.Option(
+            "--cpu-hours", help="Every run at this CPU budget (default: each run's newest round).", show_default=False
+        ),
+    ] = None,
+    at_round: Annotated[
+        int | None,
+        typer.Option(
+            "--round",
+            min=1,
+            help="Every run after this many rounds (equal transitions per main learner, not CPU).",
+            show_default=False,
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option("--out", help="Where the games are cached.")] = Path("runs/compare"),
     workers: Annotated[int, typer.Option("--workers", min=1, help="Processes that play the pairings.")] = 2,
 ) -> None:
@@ -274,11 +349,15 @@ def compare(
         if not Path(zoo).is_dir():
             raise PecliError(f"--arms {entry}: {zoo} is not a folder")
         zoos[label] = Path(zoo)
-    picked = {label: main_players(zoo, cpu_hours, at_round, report=lambda line: err_console.print(line, highlight=False))
-              for label, zoo in zoos.items()}
+    picked = {
+        label: main_players(zoo, cpu_hours, at_round, report=lambda line: err_console.print(line, highlight=False))
+        for label, zoo in zoos.items()
+    }
     scenario = scenario_for([str(players.pursuer) for runs in picked.values() for players in runs.values()], config)
     result = compare_arms(picked, scenario, out, episodes=episodes, workers=workers)
-    budget = f"{cpu_hours:g} CPU-h" if cpu_hours is not None else f"round {at_round}" if at_round else "the newest round"
+    budget = (
+        f"{cpu_hours:g} CPU-h" if cpu_hours is not None else f"round {at_round}" if at_round else "the newest round"
+    )
     console.print(f"at {budget}", highlight=False)
     for line in result.lines():
         console.print(line, highlight=False)

@@ -35,9 +35,15 @@ def _report_table(title: str, parity: dict) -> Table:
     verdict = "[green]ok[/]" if parity["passed"] else "[red]FAILED[/]"
     if parity["non_finite"]:
         verdict += f" ({parity['non_finite']} NaN/inf)"
-    table.add_row(str(parity["episodes"]), str(parity["steps"]), parity["opponent"],
-                  f"{parity['max_action_difference']:.2e}", f"{parity['max_command_difference']:.2e}",
-                  f"{parity['tolerance']:g}", verdict)
+    table.add_row(
+        str(parity["episodes"]),
+        str(parity["steps"]),
+        parity["opponent"],
+        f"{parity['max_action_difference']:.2e}",
+        f"{parity['max_command_difference']:.2e}",
+        f"{parity['tolerance']:g}",
+        verdict,
+    )
     return table
 
 
@@ -45,10 +51,15 @@ def _report_table(title: str, parity: dict) -> Table:
 @user_errors
 def export_onnx(
     checkpoint: Annotated[Path, typer.Argument(help="A zoo checkpoint (.zip with its metadata).", show_default=False)],
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="The model file (default: beside the checkpoint, .onnx).")] = None,
-    opset: Annotated[int, typer.Option("--opset", help="ONNX opset version (13 to the newest the installed torch writes).")] = 17,  # graph.DEFAULT_OPSET
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="The model file (default: beside the checkpoint, .onnx).")
+    ] = None,
+    opset: Annotated[
+        int, typer.Option("--opset", help="ONNX opset version (13 to the newest the installed torch writes).")
+    ] = 17,  # graph.DEFAULT_OPSET
     config: Annotated[
-        str | None, typer.Option("--config", "-c", help="The scenario it was trained on (default: its run's config.yaml).")
+        str | None,
+        typer.Option("--config", "-c", help="The scenario it was trained on (default: its run's config.yaml)."),
     ] = None,
     episodes: EpisodesOption = 8,
     seed: SeedOption = 0,
@@ -70,8 +81,11 @@ def export_onnx(
     result = export_checkpoint(checkpoint, out, scenario=scenario, opset=opset, episodes=episodes, seed=seed)
     parity = result.parity.to_dict()
     if as_json:
-        typer.echo(json.dumps({"model": str(result.model), "sidecar": str(result.sidecar), "bytes": result.size,
-                               "parity": parity}))
+        typer.echo(
+            json.dumps(
+                {"model": str(result.model), "sidecar": str(result.sidecar), "bytes": result.size, "parity": parity}
+            )
+        )
         return
     console.print(_report_table(f"parity of {result.model.name} against {checkpoint.name}", parity))
     err_console.print(f"wrote {result.model} ({result.size / 1024:.0f} KiB) and {result.sidecar.name}", highlight=False)

@@ -30,13 +30,21 @@ app = typer.Typer(
 HJ_CONFIG_HELP = "Scenario with two point masses: a YAML file or a built-in name (point_mass)."
 GridOption = Annotated[
     str | None,
-    typer.Option("--grid", "-g", help="Nodes per position axis and per velocity axis, e.g. 15,5 "
-                 "(default: abs8d 15,5; rel4d 81,21; rel6d 41,11)."),
+    typer.Option(
+        "--grid",
+        "-g",
+        help="Nodes per position axis and per velocity axis, e.g. 15,5 "
+        "(default: abs8d 15,5; rel4d 81,21; rel6d 41,11).",
+    ),
 ]
 ModelOption = Annotated[
     str | None,
-    typer.Option("--model", "-m", help="abs8d (both players in the arena, with its walls; the default), rel4d "
-                 "(relative position and velocity, open plane) or rel6d (relative position, both velocities)."),
+    typer.Option(
+        "--model",
+        "-m",
+        help="abs8d (both players in the arena, with its walls; the default), rel4d "
+        "(relative position and velocity, open plane) or rel6d (relative position, both velocities).",
+    ),
 ]
 OrderOption = Annotated[
     str, typer.Option("--order", help="maxmin (the pursuer answers the evader's input) or minmax (the evader answers).")
@@ -62,14 +70,22 @@ def solve(
     model: ModelOption = None,
     grid: GridOption = None,
     order: OrderOption = "maxmin",
-    steps: Annotated[int | None, typer.Option("--steps", help="Horizon in game steps (default: the scenario's T).")] = None,
+    steps: Annotated[
+        int | None, typer.Option("--steps", help="Horizon in game steps (default: the scenario's T).")
+    ] = None,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Solution file (.npz); default: the cache (see `pecli hj list`).")
     ] = None,
-    force: Annotated[bool, typer.Option("--force", help="Solve again even if a solution with the same key exists.")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="Solve again even if a solution with the same key exists.")
+    ] = False,
     backend: Annotated[
-        str, typer.Option("--backend", help="numpy (the game's discrete time) or hj-reachability (JAX, continuous "
-                          'time, rel4d; pip install "pecli\\[hj]").')
+        str,
+        typer.Option(
+            "--backend",
+            help="numpy (the game's discrete time) or hj-reachability (JAX, continuous "
+            'time, rel4d; pip install "pecli\\[hj]").',
+        ),
     ] = "numpy",
     as_json: Annotated[bool, typer.Option("--json", help="Print the solution's summary as JSON.")] = False,
 ) -> None:
@@ -86,13 +102,22 @@ def solve(
     scenario, problem = _problem(config, model, grid, order, steps, backend)
     err_console.print(f"{scenario.name}: {problem.describe()} ({problem.grid.size:,} nodes)", highlight=False)
     with Progress(
-        TextColumn("[bold]solving"), BarColumn(), MofNCompleteColumn(), TextColumn("steps"),
-        TimeElapsedColumn(), TimeRemainingColumn(), console=err_console, transient=True,
+        TextColumn("[bold]solving"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("steps"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=True,
         disable=as_json or not err_console.is_terminal,
     ) as progress:
         task = progress.add_task("solve", total=problem.steps)
         solution, path, reused = solve_cached(
-            problem, scenario.name, out=out, force=force,
+            problem,
+            scenario.name,
+            out=out,
+            force=force,
             on_step=lambda done, total: progress.update(task, completed=done),
         )
     if as_json:
@@ -109,8 +134,13 @@ def _policy_string(problem, path: Path, out: Path | None, horizon: int) -> str:
     from pecli.hj.grid import DEFAULT_MODEL, DEFAULT_SIZES
     from pecli.hj.problem import DEFAULT_ORDER
 
-    default = (problem.sizes == DEFAULT_SIZES[problem.model] and problem.order == DEFAULT_ORDER
-               and problem.backend == "numpy" and out is None and problem.steps == horizon)
+    default = (
+        problem.sizes == DEFAULT_SIZES[problem.model]
+        and problem.order == DEFAULT_ORDER
+        and problem.backend == "numpy"
+        and out is None
+        and problem.steps == horizon
+    )
     if default:
         return "hj" if problem.model == DEFAULT_MODEL else f"hj:model={problem.model}"
     return f"hj:{path}"
@@ -137,7 +167,9 @@ def show(
         solution = cache_path(Problem.for_scenario(load_scenario(config), model))  # type: ignore[arg-type]
         if not solution.is_file():
             flag = "" if model == DEFAULT_MODEL else f" --model {model}"
-            raise PecliError(f"no cached {model} solution for {config}: run `pecli hj solve --config {config}{flag}` first")
+            raise PecliError(
+                f"no cached {model} solution for {config}: run `pecli hj solve --config {config}{flag}` first"
+            )
     console.print_json(json.dumps({**Solution.load(solution).summary(), "path": str(solution)}))
 
 
@@ -157,16 +189,27 @@ def list_cache(
         return
     table = Table(title=f"HJ solutions in {folder}")
     for column in ("scenario", "model", "grid", "order", "T", "backend", "seconds", "file"):
-        table.add_column(column, justify="right" if column in ("T", "seconds") else "left",
-                         overflow="fold" if column == "file" else "ellipsis")
+        table.add_column(
+            column,
+            justify="right" if column in ("T", "seconds") else "left",
+            overflow="fold" if column == "file" else "ellipsis",
+        )
     for path in files:
         try:
             s = Solution.load(path)
         except SolutionError as exc:
             table.add_row("", "", "", "", "", "", "", f"{escape(path.name)} [red]({escape(str(exc))})[/]")
             continue
-        table.add_row(str(s.meta.get("scenario", "")), s.grid.model, s.grid.describe(), s.problem.order,
-                      str(s.problem.steps), s.problem.backend, f"{s.meta.get('seconds', 0):.1f}", path.name)
+        table.add_row(
+            str(s.meta.get("scenario", "")),
+            s.grid.model,
+            s.grid.describe(),
+            s.problem.order,
+            str(s.problem.steps),
+            s.problem.backend,
+            f"{s.meta.get('seconds', 0):.1f}",
+            path.name,
+        )
     console.print(table)
 
 

@@ -50,9 +50,12 @@ def play(
     ] = None,
     behaviour: Annotated[
         bool,
-        typer.Option("--behaviour", help="Also how the evader plays: how often each sees the other, its speed while "
-                     f"it sees the pursuer and while not, its distance to it and to the walls (at most "
-                     f"{MAX_BEHAVIOUR:,} episodes)."),
+        typer.Option(
+            "--behaviour",
+            help="Also how the evader plays: how often each sees the other, its speed while "
+            f"it sees the pursuer and while not, its distance to it and to the walls (at most "
+            f"{MAX_BEHAVIOUR:,} episodes).",
+        ),
     ] = False,
 ) -> None:
     """Play a pursuer against an evader and report the capture rate and time-to-capture.
@@ -64,8 +67,10 @@ def play(
     if behaviour and episodes > MAX_BEHAVIOUR:
         raise PecliError(f"--behaviour records every episode: play at most {MAX_BEHAVIOUR:,}")
     if behaviour and episodes * (scenario_horizon := scenario_for([pursuer, evader], config).horizon) > MAX_FRAMES:
-        raise PecliError(f"--behaviour records every step of every episode: at most {MAX_FRAMES:,} steps in all, "
-                         f"not {episodes:,} x {scenario_horizon:,}")
+        raise PecliError(
+            f"--behaviour records every step of every episode: at most {MAX_FRAMES:,} steps in all, "
+            f"not {episodes:,} x {scenario_horizon:,}"
+        )
     if render is not None and render.suffix.lower() not in (".png", ".gif"):
         raise PecliError(f"--render must end in .png or .gif, got '{render.name}'")
     if render is not None:
@@ -98,8 +103,11 @@ def play(
 
     seen = Behaviour.of(recording) if behaviour and recording is not None else None
     if as_json:
-        behaved = {key: None if math.isnan(value) else value for key, value in dataclasses.asdict(seen).items()} \
-            if seen else None  # a share of no step (never saw it) is no number: null
+        behaved = (
+            {key: None if math.isnan(value) else value for key, value in dataclasses.asdict(seen).items()}
+            if seen
+            else None
+        )  # a share of no step (never saw it) is no number: null
         typer.echo(json.dumps(result.summary() | ({"behaviour": behaved} if behaved else {})))
     else:
         table = Table(title=f"{pursuer} vs {evader} on {scenario.name} (seed {seed})")
@@ -123,17 +131,30 @@ def play(
             drawn = f"episode 1 of the {episodes}" if episodes > 1 else "the episode"
         else:
             draw_episodes(recording, render, episodes=record)
-            drawn = f"the first {min(record, episodes)} of the {episodes} episodes" if episodes > record else \
-                f"the {episodes} episode{'s' if episodes > 1 else ''}"
+            drawn = (
+                f"the first {min(record, episodes)} of the {episodes} episodes"
+                if episodes > record
+                else f"the {episodes} episode{'s' if episodes > 1 else ''}"
+            )
         err_console.print(f"wrote {escape(str(render))}: {drawn}", highlight=False)
 
 
 def _print_behaviour(seen: Behaviour) -> None:
     """The evader's behaviour as a table."""
     table = Table(title="how the evader plays (means over the steps its games lasted)")
-    for column in ("seen by the pursuer", "sees the pursuer", "speed unseen / seeing (m/step)", "distance",
-                   "to the nearest wall"):
+    for column in (
+        "seen by the pursuer",
+        "sees the pursuer",
+        "speed unseen / seeing (m/step)",
+        "distance",
+        "to the nearest wall",
+    ):
         table.add_column(column, justify="right")
-    table.add_row(f"{seen.seen:.2f}", f"{seen.sees:.2f}", f"{seen.speed_unseen:.3f} / {seen.speed_seeing:.3f}",
-                  f"{seen.distance:.1f} m", f"{seen.wall:.2f} m")
+    table.add_row(
+        f"{seen.seen:.2f}",
+        f"{seen.sees:.2f}",
+        f"{seen.speed_unseen:.3f} / {seen.speed_seeing:.3f}",
+        f"{seen.distance:.1f} m",
+        f"{seen.wall:.2f} m",
+    )
     console.print(table)

@@ -34,43 +34,67 @@ class OpponentsChoice(str, enum.Enum):
 @user_errors
 def selfplay(
     config: TrainConfigOption = None,
-    rounds: Annotated[int | None, typer.Option("--rounds", "-r", help="Rounds (default: the config's). "
-                                               "With --resume: more rounds extend the run.")] = None,
+    rounds: Annotated[
+        int | None,
+        typer.Option(
+            "--rounds", "-r", help="Rounds (default: the config's). With --resume: more rounds extend the run."
+        ),
+    ] = None,
     cpu_hours: Annotated[
         float | None,
-        typer.Option("--cpu-hours", help="Stop after the first round at which the run's CPU time (both sides' turns) "
-                     "reaches this many hours; --rounds stays the ceiling. The run keeps it: --resume continues to "
-                     "it, or to a new one given here."),
+        typer.Option(
+            "--cpu-hours",
+            help="Stop after the first round at which the run's CPU time (both sides' turns) "
+            "reaches this many hours; --rounds stays the ceiling. The run keeps it: --resume continues to "
+            "it, or to a new one given here.",
+        ),
     ] = None,
     steps_per_round: Annotated[
-        int | None, typer.Option("--steps-per-round", help="Learner transitions per side per round (default: the config's).")
+        int | None,
+        typer.Option("--steps-per-round", help="Learner transitions per side per round (default: the config's)."),
     ] = None,
     belief: Annotated[
-        BeliefChoice | None, typer.Option("--belief", help="What each actor knows of the unseen opponent (default: the config's).")
+        BeliefChoice | None,
+        typer.Option("--belief", help="What each actor knows of the unseen opponent (default: the config's)."),
     ] = None,
     schedule: Annotated[
         ScheduleChoice | None,
-        typer.Option("--schedule", help="alternating: one side trains at a time against the other's pool; "
-                     "simultaneous: both learn in the same games every step (the paper's MADDPG). "
-                     "Default: the config's, alternating."),
+        typer.Option(
+            "--schedule",
+            help="alternating: one side trains at a time against the other's pool; "
+            "simultaneous: both learn in the same games every step (the paper's MADDPG). "
+            "Default: the config's, alternating.",
+        ),
     ] = None,
     opponents: Annotated[
         OpponentsChoice | None,
-        typer.Option("--opponents", help="How opponents are drawn from the pool: latest, uniform (fictitious self-play), "
-                     "pfsp (prioritised by how often they win), league (pfsp, plus an exploiter per side and "
-                     "pecli's scripted adversaries kept in the pools) or nash (the league, with the Nash mixture of "
-                     "the pools' meta-game in place of pfsp: PSRO). Default: the config's, pfsp."),
+        typer.Option(
+            "--opponents",
+            help="How opponents are drawn from the pool: latest, uniform (fictitious self-play), "
+            "pfsp (prioritised by how often they win), league (pfsp, plus an exploiter per side and "
+            "pecli's scripted adversaries kept in the pools) or nash (the league, with the Nash mixture of "
+            "the pools' meta-game in place of pfsp: PSRO). Default: the config's, pfsp.",
+        ),
     ] = None,
-    seed: Annotated[int | None, typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, draws, noise and networks (default 0).")] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            "--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, draws, noise and networks (default 0)."
+        ),
+    ] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-selfplay-seed-time).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")
+    ] = False,
     overrides: Annotated[
         list[str] | None,
         typer.Option("--set", help="Override a training setting, e.g. --set selfplay.pfsp_power=1 --set n_envs=16."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live view (the line per round stays).")] = False,
-    algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm (both sides).")] = None,
+    algo: Annotated[
+        AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm (both sides).")
+    ] = None,
     device: DeviceOption = "cpu",
 ) -> None:
     """Train a pursuer and an evader by self-play.
@@ -99,10 +123,14 @@ def selfplay(
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
     check_cpu_hours(cpu_hours)
     settings = parse_overrides(overrides or [])
-    for key, value in (("selfplay.rounds", rounds), ("selfplay.steps_per_round", steps_per_round),
-                       ("algo", algo.value if algo else None),
-                       ("belief", belief.value if belief else None), ("selfplay.opponents", opponents.value if opponents else None),
-                       ("selfplay.schedule", schedule.value if schedule else None)):
+    for key, value in (
+        ("selfplay.rounds", rounds),
+        ("selfplay.steps_per_round", steps_per_round),
+        ("algo", algo.value if algo else None),
+        ("belief", belief.value if belief else None),
+        ("selfplay.opponents", opponents.value if opponents else None),
+        ("selfplay.schedule", schedule.value if schedule else None),
+    ):
         if value is not None:
             settings[key] = value
     if resume:
@@ -130,8 +158,11 @@ def selfplay(
             err_console.print(loop.plan(), highlight=False)
             final = loop.run()
     except SelfPlayInterrupted as stop:
-        err_console.print(f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
-                          f"continue with --resume --name {job.name}", highlight=False)
+        err_console.print(
+            f"[yellow]interrupted[/] in round {stop.round} ({stop.role}); its progress is saved: "
+            f"continue with --resume --name {job.name}",
+            highlight=False,
+        )
         raise typer.Exit(code=130) from None
     if len(loop.state.turns) == before:
         err_console.print(loop.nothing_trained(), highlight=False)
@@ -141,4 +172,3 @@ def selfplay(
         what = "its last round" if rounds == 1 else f"the mean of its last {rounds} rounds"
         average = f"; to hand over: {averages[role]} ({what})" if rounds else ""
         err_console.print(f"[green]done[/]: {role} {path}{average}", highlight=False, soft_wrap=True)
-

@@ -35,8 +35,10 @@ from pecli.errors import PecliError
 def tournament(
     paths: Annotated[
         list[str] | None,
-        typer.Argument(help="Zoo folders, run folders, checkpoint files, exported .onnx models or module:Class policies.",
-                      show_default=False),
+        typer.Argument(
+            help="Zoo folders, run folders, checkpoint files, exported .onnx models or module:Class policies.",
+            show_default=False,
+        ),
     ] = None,
     config: Annotated[
         str | None,
@@ -47,21 +49,31 @@ def tournament(
     seeds: Annotated[int, typer.Option("--seeds", help="Seeds per pairing (0 .. K-1).")] = 3,
     sample: Annotated[
         int | None,
-        typer.Option("--sample", help="Each checkpoint against M random opponents (the paper uses 32) instead of the grid."),
+        typer.Option(
+            "--sample", help="Each checkpoint against M random opponents (the paper uses 32) instead of the grid."
+        ),
     ] = None,
-    workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing pairings.")] = min(2, os.cpu_count() or 1),
+    workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing pairings.")] = min(
+        2, os.cpu_count() or 1
+    ),
     out: Annotated[
         Path | None,
-        typer.Option("--out", help="Folder for results, reports and the pairing cache "
-                     "(default: <first folder>/tournament, else runs/tournament)."),
+        typer.Option(
+            "--out",
+            help="Folder for results, reports and the pairing cache "
+            "(default: <first folder>/tournament, else runs/tournament).",
+        ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Reuse the pairings already played in --out.")] = False,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the --sample draw.")] = 0,
     nash: Annotated[
         bool,
-        typer.Option("--nash", help="Solve the zoo's meta-game: print each side's Nash mixture and every player's "
-                     "exploitability within the zoo, and write nash.json (the mixture plays as nash:OUT)."),
+        typer.Option(
+            "--nash",
+            help="Solve the zoo's meta-game: print each side's Nash mixture and every player's "
+            "exploitability within the zoo, and write nash.json (the mixture plays as nash:OUT).",
+        ),
     ] = False,
 ) -> None:
     """Play pursuers against evaders and report capture rate and time-to-capture per pairing.
@@ -99,8 +111,9 @@ def tournament(
         with sigterm_stops(), locked(out, "tournament output"):
             cache = out / "pairings"
             if cache.is_dir() and any(cache.iterdir()) and not resume:
-                raise PecliError(f"{out} already holds tournament results: pass --resume to reuse them, "
-                                 "or another --out")
+                raise PecliError(
+                    f"{out} already holds tournament results: pass --resume to reuse them, or another --out"
+                )
             scenario = scenario_for(paths, config, folders=True)
             found = find_players(paths, scenario, baselines=baselines)
             for reason in found.skipped:
@@ -116,8 +129,14 @@ def tournament(
             )
 
             with Progress(
-                TextColumn("[bold]pairings"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
-                TimeElapsedColumn(), TimeRemainingColumn(), console=err_console, transient=True,
+                TextColumn("[bold]pairings"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[last]}"),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+                console=err_console,
+                transient=True,
                 disable=as_json or not err_console.is_terminal,
             ) as progress:
                 task = progress.add_task("pairings", total=len(pairings), last="")
@@ -127,8 +146,16 @@ def tournament(
                     last = escape(f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
                     progress.update(task, advance=1, last=last)
 
-                results = run_tournament(scenario, found.players, pairings, episodes, list(range(seeds)), out,
-                                         workers=workers, on_result=report)
+                results = run_tournament(
+                    scenario,
+                    found.players,
+                    pairings,
+                    episodes,
+                    list(range(seeds)),
+                    out,
+                    workers=workers,
+                    on_result=report,
+                )
             written = write_reports(results, out)
             game = results.meta_game() if nash else None
             if game is not None:
@@ -144,10 +171,15 @@ def tournament(
             console.print(ratings_table(results, limit=40))
             if game is not None:
                 console.print(nash_table(game, limit=40))
-                err_console.print(f"the mixture plays as nash:{out} (each game draws one member by its weight)",
-                                  highlight=False, markup=False)
+                err_console.print(
+                    f"the mixture plays as nash:{out} (each game draws one member by its weight)",
+                    highlight=False,
+                    markup=False,
+                )
             err_console.print("wrote " + ", ".join(str(p) for p in written), highlight=False)
     except KeyboardInterrupt:
-        err_console.print(f"[yellow]interrupted[/]: the finished pairings are cached in {out}; continue with --resume",
-                          highlight=False)
+        err_console.print(
+            f"[yellow]interrupted[/]: the finished pairings are cached in {out}; continue with --resume",
+            highlight=False,
+        )
         raise typer.Exit(code=130) from None

@@ -27,8 +27,12 @@ class RoleChoice(str, enum.Enum):
 AlgoChoice = enum.Enum("AlgoChoice", {name: name for name in ALGOS}, type=str)
 BeliefChoice = enum.Enum("BeliefChoice", {kind.replace("-", "_"): kind for kind in BELIEF_KINDS}, type=str)
 DeviceOption = Annotated[
-    str, typer.Option("--device", help="Where the networks train: cpu, cuda (cuda:N) or auto (CUDA if there is "
-                      "one, as in SB3); checkpoints load on the CPU wherever they trained.")
+    str,
+    typer.Option(
+        "--device",
+        help="Where the networks train: cpu, cuda (cuda:N) or auto (CUDA if there is "
+        "one, as in SB3); checkpoints load on the CPU wherever they trained.",
+    ),
 ]
 
 
@@ -38,8 +42,12 @@ def train(
     config: TrainConfigOption = None,
     opponent: Annotated[
         str | None,
-        typer.Option("--opponent", "-o", help="The frozen opponent: a built-in, a checkpoint, or module:Class. "
-                     "Default: greedy for a pursuer, pure-pursuit for an evader."),
+        typer.Option(
+            "--opponent",
+            "-o",
+            help="The frozen opponent: a built-in, a checkpoint, or module:Class. "
+            "Default: greedy for a pursuer, pure-pursuit for an evader.",
+        ),
     ] = None,
     algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Override the config's algorithm.")] = None,
     belief: Annotated[
@@ -47,13 +55,20 @@ def train(
         typer.Option("--belief", help="What the actor knows of the unseen opponent (default: the config's, none)."),
     ] = None,
     steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
-    seed: Annotated[int | None, typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, noise and networks (default 0).")] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, noise and networks (default 0)."),
+    ] = None,
     zoo: Annotated[Path, typer.Option("--zoo", help="The zoo folder runs are written to.")] = Path("zoo"),
     name: Annotated[str | None, typer.Option("--name", help="Run name (default: scenario-role-seed-time).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")] = False,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue the run --name from its newest checkpoint.")
+    ] = False,
     overrides: Annotated[
         list[str] | None,
-        typer.Option("--set", help="Override a training setting, e.g. --set batch_size=256 --set curriculum.enabled=false."),
+        typer.Option(
+            "--set", help="Override a training setting, e.g. --set batch_size=256 --set curriculum.enabled=false."
+        ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress display.")] = False,
     device: DeviceOption = "cpu",
@@ -111,18 +126,26 @@ def train(
     )
 
     def started(run: Run) -> None:
-        err_console.print(f"run [bold]{escape(str(run.path))}[/]: {role_name} vs {escape(job.opponent)} on "
-                          f"{escape(scenario.name)}, "
-                          f"{scenario.training.steps:,} steps", highlight=False)
+        err_console.print(
+            f"run [bold]{escape(str(run.path))}[/]: {role_name} vs {escape(job.opponent)} on "
+            f"{escape(scenario.name)}, "
+            f"{scenario.training.steps:,} steps",
+            highlight=False,
+        )
 
     try:
         with sigterm_stops():  # a scheduler's or a benchmark's time limit saves like Ctrl-C
             final = run_training(job, on_start=started, report=lambda line: err_console.print(line, highlight=False))
     except TrainingInterrupted as stop:
-        err_console.print(f"[yellow]interrupted[/]: saved {stop.checkpoint}; "
-                          f"continue with --resume --name {job.name}", highlight=False)
+        err_console.print(
+            f"[yellow]interrupted[/]: saved {stop.checkpoint}; continue with --resume --name {job.name}",
+            highlight=False,
+        )
         raise typer.Exit(code=130) from None
     run_dir = zoo / job.name
-    err_console.print(f"[green]done[/]: {escape(str(final))}\n  checkpoints and their metadata in "
-                      f"{escape(str(run_dir / role_name))}/, the run's config and command in {escape(str(run_dir))}/\n"
-                      f"  learning curves: tensorboard --logdir {escape(str(run_dir / 'tb'))}", highlight=False)
+    err_console.print(
+        f"[green]done[/]: {escape(str(final))}\n  checkpoints and their metadata in "
+        f"{escape(str(run_dir / role_name))}/, the run's config and command in {escape(str(run_dir))}/\n"
+        f"  learning curves: tensorboard --logdir {escape(str(run_dir / 'tb'))}",
+        highlight=False,
+    )

@@ -33,11 +33,21 @@ class PrunerChoice(str, enum.Enum):
     none = "none"
 
 
-DirOption = Annotated[Path, typer.Option("--dir", help=f"Folder of the default SQLite storage ({DB_NAME}) and "
-                                         "of each study's report and scratch files.")]
-StorageOption = Annotated[str | None, typer.Option("--storage", help="Any Optuna storage URL, e.g. "
-                                                   "sqlite:///studies.db or postgresql://host/db (default: "
-                                                   f"sqlite:///<dir>/{DB_NAME}).")]
+DirOption = Annotated[
+    Path,
+    typer.Option(
+        "--dir", help=f"Folder of the default SQLite storage ({DB_NAME}) and of each study's report and scratch files."
+    ),
+]
+StorageOption = Annotated[
+    str | None,
+    typer.Option(
+        "--storage",
+        help="Any Optuna storage URL, e.g. "
+        "sqlite:///studies.db or postgresql://host/db (default: "
+        f"sqlite:///<dir>/{DB_NAME}).",
+    ),
+]
 
 
 def _tune(what: str, **options: Any) -> None:
@@ -66,13 +76,28 @@ def _tune(what: str, **options: Any) -> None:
     if o["resume"]:
         if o["study"] is None:
             raise PecliError("--resume needs the --study to continue")
-        given = [f"--{k.replace('_', '-')}" for k in ("config", "opponent", "eval_opponents", "cpu_minutes",
-                                                      "evaluations", "eval_episodes", "space", "pruner", "seed", "algo",
-                                                      "repeats")
-                 if o[k] is not None]
+        given = [
+            f"--{k.replace('_', '-')}"
+            for k in (
+                "config",
+                "opponent",
+                "eval_opponents",
+                "cpu_minutes",
+                "evaluations",
+                "eval_episodes",
+                "space",
+                "pruner",
+                "seed",
+                "algo",
+                "repeats",
+            )
+            if o[k] is not None
+        ]
         if given:
-            raise PecliError(f"a resumed study keeps its settings (not {', '.join(given)}); only --trials, --jobs "
-                             "and --device may be given")
+            raise PecliError(
+                f"a resumed study keeps its settings (not {', '.join(given)}); only --trials, --jobs "
+                "and --device may be given"
+            )
         study = load_study(storage, o["study"])
         settings = stored_settings(study)
         if settings.what != what:
@@ -85,13 +110,23 @@ def _tune(what: str, **options: Any) -> None:
             space.fixed["algo"] = o["algo"].value
             space.check(scenario, "--algo")
         opponent = None if what == "selfplay" else (o["opponent"] or DEFAULT_OPPONENT[what])
-        evaluated = ([] if what == "selfplay" else
-                     [name.strip() for name in (o["eval_opponents"] or opponent).split(",") if name.strip()])
-        given = {k: o[k] for k in ("cpu_minutes", "evaluations", "eval_episodes", "seed", "repeats") if o[k] is not None}
+        evaluated = (
+            []
+            if what == "selfplay"
+            else [name.strip() for name in (o["eval_opponents"] or opponent).split(",") if name.strip()]
+        )
+        given = {
+            k: o[k] for k in ("cpu_minutes", "evaluations", "eval_episodes", "seed", "repeats") if o[k] is not None
+        }
         settings = TuneSettings(
-            what=what, scenario=scenario.model_dump(mode="json"), space=space.model_dump(mode="json"),
-            opponent=opponent, eval_opponents=evaluated, pruner=(o["pruner"] or PrunerChoice.median).value,
-            space_text=text, **{"cpu_minutes": 3.0, **given},
+            what=what,
+            scenario=scenario.model_dump(mode="json"),
+            space=space.model_dump(mode="json"),
+            opponent=opponent,
+            eval_opponents=evaluated,
+            pruner=(o["pruner"] or PrunerChoice.median).value,
+            space_text=text,
+            **{"cpu_minutes": 3.0, **given},
         )
         for option in ("cpu_minutes", "evaluations", "eval_episodes", "repeats"):
             if getattr(settings, option) <= 0:
@@ -112,19 +147,30 @@ def _tune(what: str, **options: Any) -> None:
     study.set_user_attr(TRIALS_ATTR, total)
     folder = o["dir"] / study.study_name
     runs = f"{settings.repeats} runs of " if settings.repeats > 1 else ""
-    err_console.print(f"study [bold]{study.study_name}[/] in {storage}: {what} on {settings.scenario['name']}, "
-                      f"{total} trials of {runs}{settings.cpu_minutes:g} CPU-min, {o['jobs']} at a time",
-                      highlight=False)
-    worker = Worker(storage, study.study_name, total, folder, o["device"], settings.seed,
-                    report=lambda line: err_console.print(line, highlight=False, markup=False))
+    err_console.print(
+        f"study [bold]{study.study_name}[/] in {storage}: {what} on {settings.scenario['name']}, "
+        f"{total} trials of {runs}{settings.cpu_minutes:g} CPU-min, {o['jobs']} at a time",
+        highlight=False,
+    )
+    worker = Worker(
+        storage,
+        study.study_name,
+        total,
+        folder,
+        o["device"],
+        settings.seed,
+        report=lambda line: err_console.print(line, highlight=False, markup=False),
+    )
 
     try:
         with sigterm_stops():
             run_workers(worker, o["jobs"])
     except KeyboardInterrupt:
-        err_console.print(f"[yellow]interrupted[/]: finished trials are stored; continue with "
-                          f"--resume --study {study.study_name}" + (f" --storage {storage}" if o["storage"] else ""),
-                          highlight=False)
+        err_console.print(
+            f"[yellow]interrupted[/]: finished trials are stored; continue with "
+            f"--resume --study {study.study_name}" + (f" --storage {storage}" if o["storage"] else ""),
+            highlight=False,
+        )
         raise typer.Exit(code=130) from None
     written = write_report(study, folder)
     err_console.print(f"[green]done[/]: report {written[0]}", highlight=False)
@@ -145,40 +191,108 @@ def _command(what: str, doc: str) -> Any:
     @user_errors
     def command(
         config: TrainConfigOption = None,
-        opponent: Annotated[str | None, typer.Option("--opponent", "-o", help="The frozen opponent (default: greedy "
-                                                     "for a pursuer, pure-pursuit for an evader).")] = None,
-        eval_opponents: Annotated[str | None, typer.Option("--eval-opponents", help="Comma-separated opponents the "
-                                                           "learner is scored against (default: --opponent).")] = None,
-        trials: Annotated[int | None, typer.Option("--trials", "-n", help="Trials the study has when done (complete "
-                                                   "or pruned; default 30, a resumed study its own).")] = None,
-        cpu_minutes: Annotated[float | None, typer.Option("--cpu-minutes", help="CPU budget of a training run "
-                                                          "(a trial has --repeats of them; default 3).")] = None,
-        evaluations: Annotated[int | None, typer.Option("--evaluations", help="Evaluations per training run, evenly "
-                                                        "over its budget, reported to the pruner (default 6).")] = None,
-        eval_episodes: Annotated[int | None, typer.Option("--eval-episodes", help="Games per opponent and evaluation "
-                                                          "(default 200).")] = None,
-        jobs: Annotated[int, typer.Option("--jobs", "-j", help="Trials run in parallel processes, one torch thread "
-                                          "each; the study may end up to J - 1 trials over --trials.")] = 1,
+        opponent: Annotated[
+            str | None,
+            typer.Option(
+                "--opponent",
+                "-o",
+                help="The frozen opponent (default: greedy for a pursuer, pure-pursuit for an evader).",
+            ),
+        ] = None,
+        eval_opponents: Annotated[
+            str | None,
+            typer.Option(
+                "--eval-opponents",
+                help="Comma-separated opponents the learner is scored against (default: --opponent).",
+            ),
+        ] = None,
+        trials: Annotated[
+            int | None,
+            typer.Option(
+                "--trials",
+                "-n",
+                help="Trials the study has when done (complete or pruned; default 30, a resumed study its own).",
+            ),
+        ] = None,
+        cpu_minutes: Annotated[
+            float | None,
+            typer.Option(
+                "--cpu-minutes", help="CPU budget of a training run (a trial has --repeats of them; default 3)."
+            ),
+        ] = None,
+        evaluations: Annotated[
+            int | None,
+            typer.Option(
+                "--evaluations",
+                help="Evaluations per training run, evenly over its budget, reported to the pruner (default 6).",
+            ),
+        ] = None,
+        eval_episodes: Annotated[
+            int | None, typer.Option("--eval-episodes", help="Games per opponent and evaluation (default 200).")
+        ] = None,
+        jobs: Annotated[
+            int,
+            typer.Option(
+                "--jobs",
+                "-j",
+                help="Trials run in parallel processes, one torch thread "
+                "each; the study may end up to J - 1 trials over --trials.",
+            ),
+        ] = 1,
         storage: StorageOption = None,
         study: Annotated[str | None, typer.Option("--study", help="Study name (default: <config>-<what>).")] = None,
-        resume: Annotated[bool, typer.Option("--resume", help="Continue the stored --study (its own settings).")] = False,
-        space: Annotated[Path | None, typer.Option("--space", help="Search space YAML (default: `pecli tune space`).")] = None,
+        resume: Annotated[
+            bool, typer.Option("--resume", help="Continue the stored --study (its own settings).")
+        ] = False,
+        space: Annotated[
+            Path | None, typer.Option("--space", help="Search space YAML (default: `pecli tune space`).")
+        ] = None,
         algo: Annotated[AlgoChoice | None, typer.Option("--algo", help="Tune this algorithm only.")] = None,
-        pruner: Annotated[PrunerChoice | None, typer.Option("--pruner", help="median (default), halving "
-                                                            "(successive halving) or none.")] = None,
-        seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of trial 0 (trial i trains with "
-                                                 "seed + i, or seed + i*R with --repeats R; default 0).")] = None,
-        repeats: Annotated[int | None, typer.Option("--repeats", help="Training runs per trial, each on its "
-                                                    "own seed (trial i: seed + i*R ... seed + i*R + R-1), each "
-                                                    "with --cpu-minutes; the trial scores their mean (default 1)."
-                                                    )] = None,
+        pruner: Annotated[
+            PrunerChoice | None,
+            typer.Option("--pruner", help="median (default), halving (successive halving) or none."),
+        ] = None,
+        seed: Annotated[
+            int | None,
+            typer.Option(
+                "--seed",
+                "-s",
+                help="Seed of trial 0 (trial i trains with seed + i, or seed + i*R with --repeats R; default 0).",
+            ),
+        ] = None,
+        repeats: Annotated[
+            int | None,
+            typer.Option(
+                "--repeats",
+                help="Training runs per trial, each on its "
+                "own seed (trial i: seed + i*R ... seed + i*R + R-1), each "
+                "with --cpu-minutes; the trial scores their mean (default 1).",
+            ),
+        ] = None,
         device: DeviceOption = "cpu",
         folder: DirOption = DEFAULT_DIR,
     ) -> None:
-        _tune(what, config=config, opponent=opponent, eval_opponents=eval_opponents, trials=trials,
-              cpu_minutes=cpu_minutes, evaluations=evaluations, eval_episodes=eval_episodes, jobs=jobs,
-              storage=storage, study=study, resume=resume, space=space, algo=algo, pruner=pruner, seed=seed,
-              repeats=repeats, device=device, dir=folder)
+        _tune(
+            what,
+            config=config,
+            opponent=opponent,
+            eval_opponents=eval_opponents,
+            trials=trials,
+            cpu_minutes=cpu_minutes,
+            evaluations=evaluations,
+            eval_episodes=eval_episodes,
+            jobs=jobs,
+            storage=storage,
+            study=study,
+            resume=resume,
+            space=space,
+            algo=algo,
+            pruner=pruner,
+            seed=seed,
+            repeats=repeats,
+            device=device,
+            dir=folder,
+        )
 
     command.__doc__ = doc
     return command
@@ -194,8 +308,9 @@ _COMMON = (
 )
 app.command("pursuer")(_command("pursuer", "Tune the training of a pursuer against a frozen evader." + _COMMON))
 app.command("evader")(_command("evader", "Tune the training of an evader against a frozen pursuer." + _COMMON))
-app.command("selfplay")(_command("selfplay", "Tune self-play; a trial scores both sides against the other's "
-                                 "baselines." + _COMMON))
+app.command("selfplay")(
+    _command("selfplay", "Tune self-play; a trial scores both sides against the other's baselines." + _COMMON)
+)
 
 
 @app.command("report")
@@ -205,10 +320,16 @@ def report(
     storage: StorageOption = None,
     folder: DirOption = DEFAULT_DIR,
     out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: <dir>/<study>).")] = None,
-    profile: Annotated[Path | None, typer.Option("--profile", help="Also write the best trial's settings as a "
-                                                 "scenario YAML (a training profile).")] = None,
-    name: Annotated[str | None, typer.Option("--name", help="The profile's scenario name (default: the file's stem).")] = None,
-    trial: Annotated[int | None, typer.Option("--trial", help="Take the profile from this trial, not the best.")] = None,
+    profile: Annotated[
+        Path | None,
+        typer.Option("--profile", help="Also write the best trial's settings as a scenario YAML (a training profile)."),
+    ] = None,
+    name: Annotated[
+        str | None, typer.Option("--name", help="The profile's scenario name (default: the file's stem).")
+    ] = None,
+    trial: Annotated[
+        int | None, typer.Option("--trial", help="Take the profile from this trial, not the best.")
+    ] = None,
 ) -> None:
     """Print a study's best trials and importances; write report.md and the PNGs, and optionally a profile."""
     import optuna
@@ -226,10 +347,15 @@ def report(
     written = write_report(study, out or folder / study_name)
     err_console.print(f"wrote {', '.join(str(p) for p in written)}", highlight=False)
     if profile is not None:
-        complete = [t.number for t in study.get_trials(deepcopy=False) if t.value is not None
-                    and t.state == optuna.trial.TrialState.COMPLETE]
+        complete = [
+            t.number
+            for t in study.get_trials(deepcopy=False)
+            if t.value is not None and t.state == optuna.trial.TrialState.COMPLETE
+        ]
         if not complete or (trial is not None and trial not in complete):
-            raise PecliError(f"study '{study_name}' has no complete trial {trial if trial is not None else ''}".rstrip())
+            raise PecliError(
+                f"study '{study_name}' has no complete trial {trial if trial is not None else ''}".rstrip()
+            )
         atomic_write_text(profile, make_profile(study, name or profile.stem, trial))
         err_console.print(f"wrote the profile {profile}", highlight=False)
 

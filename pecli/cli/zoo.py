@@ -46,8 +46,17 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
                 continue
             rated = ratings.get(str(entry.path.resolve()))
             rating = f"{rated['elo']:.0f} ± {rated['stderr']:.0f}" if rated else ""
-            table.add_row(run.name, meta.role, entry.path.stem, f"{meta.steps:,}", str(meta.episodes), meta.algo,
-                          meta.belief, meta.scenario, rating)
+            table.add_row(
+                run.name,
+                meta.role,
+                entry.path.stem,
+                f"{meta.steps:,}",
+                str(meta.episodes),
+                meta.algo,
+                meta.belief,
+                meta.scenario,
+                rating,
+            )
     console.print(table)
 
 
@@ -78,8 +87,10 @@ def _check_network(checkpoint: Path, meta: CheckpointMeta) -> None:
         return
     scenario = _scenario_of(checkpoint, meta)
     if scenario is None:
-        err_console.print(f"note: the scenario of {checkpoint} ('{meta.scenario}') is not at hand; its network was "
-                          "not checked", highlight=False)
+        err_console.print(
+            f"note: the scenario of {checkpoint} ('{meta.scenario}') is not at hand; its network was not checked",
+            highlight=False,
+        )
         return
     from pecli.models.checkpoint import load_policy
 
@@ -149,8 +160,11 @@ def best(
 
     if role not in ("pursuer", "evader"):
         raise PecliError(f"role must be pursuer or evader, not '{role}'")
-    rated = [r for path, r in tournament_ratings(zoo).items() if r.get("role") == role and path.endswith(".zip")
-             and Path(path).is_file()]
+    rated = [
+        r
+        for path, r in tournament_ratings(zoo).items()
+        if r.get("role") == role and path.endswith(".zip") and Path(path).is_file()
+    ]
     if not rated:
         raise PecliError(f"no rated {role} checkpoint in {zoo}: run `pecli tournament {zoo}` first")
     for entry in sorted(rated, key=lambda r: -r["elo"]):
@@ -171,12 +185,22 @@ def best(
 @app.command("average")
 @user_errors
 def average(
-    checkpoints: Annotated[list[Path], typer.Argument(
-        help="Checkpoints of one network, oldest first; or one folder of a run's rounds (e.g. RUN/pursuer).",
-        show_default=False)],
+    checkpoints: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Checkpoints of one network, oldest first; or one folder of a run's rounds (e.g. RUN/pursuer).",
+            show_default=False,
+        ),
+    ],
     last: Annotated[int, typer.Option("--last", min=1, help="With a folder: average its newest N rounds.")] = 10,
-    out: Annotated[Path | None, typer.Option("--out", help="The checkpoint to write (default, with a folder: "
-                                             "FOLDER/average-A-B.zip, A and B its first and last round).")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            help="The checkpoint to write (default, with a folder: "
+            "FOLDER/average-A-B.zip, A and B its first and last round).",
+        ),
+    ] = None,
 ) -> None:
     """Write a checkpoint whose weights are the mean of CHECKPOINTS' (weight averaging over a run's last rounds).
 
@@ -203,8 +227,11 @@ def average(
     if any(out.resolve() == path.resolve() for path in checkpoints):
         raise PecliError(f"--out {out} is one of the checkpoints averaged")
     meta = average_checkpoints(checkpoints, out)
-    err_console.print(f"wrote {out}: the mean of {len(checkpoints)} {meta.role} checkpoints "
-                      f"({checkpoints[0].name} .. {checkpoints[-1].name})", highlight=False)
+    err_console.print(
+        f"wrote {out}: the mean of {len(checkpoints)} {meta.role} checkpoints "
+        f"({checkpoints[0].name} .. {checkpoints[-1].name})",
+        highlight=False,
+    )
 
 
 @app.command("fork")
@@ -212,8 +239,10 @@ def average(
 def fork(
     run: Annotated[Path, typer.Argument(help="The stopped self-play run to copy.", show_default=False)],
     to: Annotated[Path, typer.Option("--to", help="The zoo the copy goes into.", show_default=False)],
-    add: Annotated[list[str] | None, typer.Option("--add", help="A scripted player that joins the copy's pools "
-                                                  "(repeat for several).")] = None,
+    add: Annotated[
+        list[str] | None,
+        typer.Option("--add", help="A scripted player that joins the copy's pools (repeat for several)."),
+    ] = None,
 ) -> None:
     """Copy a stopped self-play run whole into another zoo, to train on as one arm of an A/B (the original trained
     on is the control). [bold]--add[/] puts scripted players into its pools, as the ones a run starts with."""
@@ -221,5 +250,6 @@ def fork(
 
     target = fork_run(run, to, add or [])
     added = f", with {', '.join(add)} in its pools" if add else ""
-    console.print(f"{target}: a copy of {run} at {run_cpu_hours(target):.2f} CPU-h{added}", highlight=False,
-                  markup=False)
+    console.print(
+        f"{target}: a copy of {run} at {run_cpu_hours(target):.2f} CPU-h{added}", highlight=False, markup=False
+    )

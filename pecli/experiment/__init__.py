@@ -21,8 +21,16 @@ from pecli.experiment.spec import (
 if TYPE_CHECKING:
     from pecli.experiment.ray_executor import RayCluster
 
-__all__ = ["Experiment", "ExperimentRunner", "LoadedExperiment", "RayCluster", "RunSpec", "builtin_experiments",
-           "load_experiment", "open_experiment"]
+__all__ = [
+    "Experiment",
+    "ExperimentRunner",
+    "LoadedExperiment",
+    "RayCluster",
+    "RunSpec",
+    "builtin_experiments",
+    "load_experiment",
+    "open_experiment",
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -56,9 +56,15 @@ def _main_turns(state: Path) -> tuple[dict[tuple[int, Role], Path], list[dict]]:
     return main, [t.model_dump() for t in record.turns]
 
 
-def main_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None = None, average: int = 1,
-                 averaged: Iterable[Role] = ("pursuer",), pattern: re.Pattern[str] | None = None,
-                 report: Callable[[str], None] = lambda line: None) -> dict[str, RunPlayers]:
+def main_players(
+    zoo: Path,
+    cpu_hours: float | None = None,
+    at_round: int | None = None,
+    average: int = 1,
+    averaged: Iterable[Role] = ("pursuer",),
+    pattern: re.Pattern[str] | None = None,
+    report: Callable[[str], None] = lambda line: None,
+) -> dict[str, RunPlayers]:
     """Each self-play run's main players: of its newest round, of round ``at_round``, or with ``cpu_hours`` of the
     first round by whose end the run had spent that much CPU (where a run of that budget stops). A run not there yet
     is left out, and ``report`` says so. With ``average`` k > 1 the players of the roles ``averaged`` are the means
@@ -81,8 +87,13 @@ def main_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None
         elif at_round is not None:
             chosen = [r for r in done if r == at_round]
         if not chosen:
-            where = (f"{max(spent, default=0.0):.2f} of {cpu_hours} CPU-h" if cpu_hours is not None
-                     else f"round {max(done, default=0)} of {at_round}" if at_round is not None else "no round")
+            where = (
+                f"{max(spent, default=0.0):.2f} of {cpu_hours} CPU-h"
+                if cpu_hours is not None
+                else f"round {max(done, default=0)} of {at_round}"
+                if at_round is not None
+                else "no round"
+            )
             report(f"{name}: left out, {where} so far")
             continue
         last = chosen[0]
@@ -106,6 +117,7 @@ def main_players(zoo: Path, cpu_hours: float | None = None, at_round: int | None
 
 
 # --- tests between groups of runs ---------------------------------------------------------------------------------
+
 
 def pool(faced: Faced, runs: Iterable[Hashable], evaders: set | None = None) -> tuple[int, int]:
     """Captures and games of the pursuers of ``runs`` summed over the evaders they met (or ``evaders``)."""
@@ -152,12 +164,14 @@ def over_every_evader(faced: Faced, first: list, second: list) -> tuple[set, flo
     common = set().union(*(faced[n] for n in first)) & set().union(*(faced[n] for n in second))
     if not common:
         raise ValueError("no evader was met by a pursuer of each side")
-    excess, p_stratified = mantel_haenszel_test([(*pool(faced, first, {e}), *pool(faced, second, {e}))
-                                                 for e in sorted(common, key=str)])
+    excess, p_stratified = mantel_haenszel_test(
+        [(*pool(faced, first, {e}), *pool(faced, second, {e})) for e in sorted(common, key=str)]
+    )
     return common, *pooled_z_test(faced, first, second, common), excess, p_stratified
 
 
 # --- playing the arms -----------------------------------------------------------------------------------------------
+
 
 @dataclass
 class ArmRow:
@@ -192,29 +206,42 @@ class Comparison:
         """The comparison as Markdown."""
         first, *others = self.arms
         extra = f" and {first}'s {', '.join(self.bystanders)}" if self.bystanders else ""
-        lines = [f"{', '.join(self.arms)}: {self.episodes} games per pairing; cross-play: the other runs' evaders of "
-                 f"every arm{extra}", "",
-                 f"| arm | run | round | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | "
-                 "cross-play | its evader: vs pure pursuit / vs the other pursuers | CPU-h |",
-                 "| --- | --- | ---: | --- | --- | ---: | --- | ---: |"]
+        lines = [
+            f"{', '.join(self.arms)}: {self.episodes} games per pairing; cross-play: the other runs' evaders of "
+            f"every arm{extra}",
+            "",
+            f"| arm | run | round | vs {' / '.join(HEURISTIC_EVADERS)} | vs {' / '.join(ADVERSARIES)} | "
+            "cross-play | its evader: vs pure pursuit / vs the other pursuers | CPU-h |",
+            "| --- | --- | ---: | --- | --- | ---: | --- | ---: |",
+        ]
         for row in self.rows:
             cross = "—" if row.cross_play is None else f"{row.cross_play:.2f}"
             others_rate = "—" if row.evader_vs_others is None else f"{row.evader_vs_others:.2f}"
-            lines.append(f"| {row.arm} | {row.run} | {row.round} | "
-                         f"{' / '.join(f'{row.scripted[e]:.2f}' for e in HEURISTIC_EVADERS)} | "
-                         f"{' / '.join(f'{row.scripted[e]:.2f}' for e in ADVERSARIES)} | {cross} | "
-                         f"{row.held_by_pure_pursuit:.2f} / {others_rate} | {row.cpu_hours:.2f} |")
+            lines.append(
+                f"| {row.arm} | {row.run} | {row.round} | "
+                f"{' / '.join(f'{row.scripted[e]:.2f}' for e in HEURISTIC_EVADERS)} | "
+                f"{' / '.join(f'{row.scripted[e]:.2f}' for e in ADVERSARIES)} | {cross} | "
+                f"{row.held_by_pure_pursuit:.2f} / {others_rate} | {row.cpu_hours:.2f} |"
+            )
         if not others:
             return lines
         c0, n0 = self.pooled[first]
-        lines += ["", f"pursuers pooled over every evader they met ({len(self.runs)} runs, {n0} games per arm): "
-                  f"{first} {c0 / n0:.3f}"]
+        lines += [
+            "",
+            f"pursuers pooled over every evader they met ({len(self.runs)} runs, {n0} games per arm): "
+            f"{first} {c0 / n0:.3f}",
+        ]
         for label in others:
             c1, n1 = self.pooled[label]
-            paired = "a paired test needs 2 runs" if self.paired_p[label] is None else \
-                f"paired t-test p = {self.paired_p[label]:.2g}"
-            lines.append(f"- {label} {c1 / n1:.3f}: z-test against {first} p = {self.z_p[label]:.2g}; per run "
-                         f"{', '.join(f'{d:+.3f}' for d in self.differences[label])} ({paired})")
+            paired = (
+                "a paired test needs 2 runs"
+                if self.paired_p[label] is None
+                else f"paired t-test p = {self.paired_p[label]:.2g}"
+            )
+            lines.append(
+                f"- {label} {c1 / n1:.3f}: z-test against {first} p = {self.z_p[label]:.2g}; per run "
+                f"{', '.join(f'{d:+.3f}' for d in self.differences[label])} ({paired})"
+            )
         return lines
 
 
@@ -229,8 +256,9 @@ def _players(paths: list[Path], scenario: Scenario) -> tuple[dict[Path, Player],
     return of, found  # type: ignore[return-value]
 
 
-def compare_arms(arms: dict[str, dict[str, RunPlayers]], scenario: Scenario, out: Path, episodes: int = 500,
-                 workers: int = 2) -> Comparison:
+def compare_arms(
+    arms: dict[str, dict[str, RunPlayers]], scenario: Scenario, out: Path, episodes: int = 500, workers: int = 2
+) -> Comparison:
     """Play every arm's runs (picked by :func:`main_players`) as the module says; the games are cached in ``out``."""
     if not arms:
         raise PecliError("compare needs one arm or more")
@@ -245,11 +273,14 @@ def compare_arms(arms: dict[str, dict[str, RunPlayers]], scenario: Scenario, out
     player.update({(first, o, "evader"): of[arms[first][o].evader] for o in bystanders})
     scripted = {name: Player(name, name, "evader", f"builtin:{name}") for name in (*HEURISTIC_EVADERS, *ADVERSARIES)}
     pure = Player("pure-pursuit", "pure-pursuit", "pursuer", "builtin:pure-pursuit")
-    players: dict[Role, list[Player]] = {"pursuer": [*found["pursuer"], pure],
-                                         "evader": [*found["evader"], *scripted.values()]}
+    players: dict[Role, list[Player]] = {
+        "pursuer": [*found["pursuer"], pure],
+        "evader": [*found["evader"], *scripted.values()],
+    }
     met: dict[str, list[str | tuple[str, str]]] = {
         n: [*scripted, *((label, o) for label in arms for o in names if o != n), *((first, o) for o in bystanders)]
-        for n in names}
+        for n in names
+    }
 
     def evader(key: str | tuple[str, str]) -> Player:
         return scripted[key] if isinstance(key, str) else player[(*key, "evader")]
@@ -272,10 +303,18 @@ def compare_arms(arms: dict[str, dict[str, RunPlayers]], scenario: Scenario, out
             mine = result.faced[(label, n)]
             against = [result.faced[(other, o)][(label, n)] for other in arms for o in names if o != n]
             held = results[(pure.name, player[(label, n, "evader")].name)]
-            result.rows.append(ArmRow(label, n, runs[n].round, runs[n].cpu_hours,
-                                      {e: mine[e][0] / mine[e][1] for e in scripted},
-                                      share([r for e, r in mine.items() if not isinstance(e, str)]),
-                                      held.captures / held.episodes, share(against)))
+            result.rows.append(
+                ArmRow(
+                    label,
+                    n,
+                    runs[n].round,
+                    runs[n].cpu_hours,
+                    {e: mine[e][0] / mine[e][1] for e in scripted},
+                    share([r for e, r in mine.items() if not isinstance(e, str)]),
+                    held.captures / held.episodes,
+                    share(against),
+                )
+            )
         result.pooled[label] = pool(result.faced, [(label, n) for n in names])
     c0, n0 = result.pooled[first]
     per_run = {label: run_rates(result.faced, [(label, n) for n in names]) for label in arms}

@@ -39,7 +39,9 @@ def open_experiment(out: Path) -> LoadedExperiment:
     """The experiment recorded in ``out`` (by a previous ``run``)."""
     path = out / SPEC_FILE
     if not path.is_file():
-        raise PecliError(f"{out} holds no experiment (no {SPEC_FILE}): start one with `pecli experiment run NAME --out {out}`")
+        raise PecliError(
+            f"{out} holds no experiment (no {SPEC_FILE}): start one with `pecli experiment run NAME --out {out}`"
+        )
     return experiment_from_dict(read_yaml(path), str(path))  # ConfigError in one line if damaged
 
 
@@ -65,8 +67,10 @@ def stage_lines(out: Path, state: dict[str, Any], alive: bool) -> list[str]:
     lines = []
     sessions = state.get("sessions") or [{}]
     if state.get("stages", {}).get("train") == "paused" and sessions[-1].get("until_cpu_hours"):
-        lines.append(f"training: paused, every run at {sessions[-1]['until_cpu_hours']:g} CPU-h or its own budget "
-                     "(--until-cpu-hours)")
+        lines.append(
+            f"training: paused, every run at {sessions[-1]['until_cpu_hours']:g} CPU-h or its own budget "
+            "(--until-cpu-hours)"
+        )
     for name in ("ranking", "tournament"):
         stage = state.get("stages", {}).get(name)
         if not isinstance(stage, dict):
@@ -96,7 +100,9 @@ def statuses(experiment: LoadedExperiment, out: Path) -> list[RunStatus]:
             status = "done"
         elif status in ("running", "queued") and not alive:
             status = "stopped"
-        elif status == "queued" and marker.get("started", 0) >= (state.get("driver") or {}).get("started", float("inf")):
+        elif status == "queued" and marker.get("started", 0) >= (state.get("driver") or {}).get(
+            "started", float("inf")
+        ):
             status = "running"
         row = RunStatus(run, progress, status, record.get("error", ""), host=marker.get("host", ""))
         rows.append(row)

@@ -81,9 +81,13 @@ class ExperimentRunner:
     budget first, the rest on a later call with a larger value or none. One-role runs train to their end.
     """
 
-    def __init__(self, experiment: LoadedExperiment, out: Path,
-                 on_update: Callable[[list[RunStatus], str], None] = lambda rows, stage: None,
-                 until_cpu_hours: float | None = None) -> None:
+    def __init__(
+        self,
+        experiment: LoadedExperiment,
+        out: Path,
+        on_update: Callable[[list[RunStatus], str], None] = lambda rows, stage: None,
+        until_cpu_hours: float | None = None,
+    ) -> None:
         if until_cpu_hours is not None and not until_cpu_hours > 0:
             raise PecliError(f"--until-cpu-hours must be a positive number of hours, not {until_cpu_hours}")
         self.experiment = experiment
@@ -104,19 +108,25 @@ class ExperimentRunner:
         state = read_state(self.out)
         if state:
             if state.get("fingerprint") != spec.fingerprint():
-                raise PecliError(f"{self.out} holds experiment '{state.get('name')}' with other settings: "
-                                 "give another --out (or the same experiment file to continue it)")
+                raise PecliError(
+                    f"{self.out} holds experiment '{state.get('name')}' with other settings: "
+                    "give another --out (or the same experiment file to continue it)"
+                )
             if driver_alive(state):
-                raise PecliError(f"{self.out} is being run by process {state['driver']['pid']}: wait for it, or stop it")
+                raise PecliError(
+                    f"{self.out} is being run by process {state['driver']['pid']}: wait for it, or stop it"
+                )
         scenario = self.experiment.scenario.model_dump(mode="json", exclude={"name", "description"})
         recorded = self.out / SCENARIO_FILE
         if state and recorded.is_file():
             changed = setting_changes(read_yaml(recorded), scenario)
             if changed:
                 more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
-                raise PecliError(f"the scenario '{spec.scenario}' has changed since {self.out} started "
-                                 f"({changed[0]}{more}; as first run: {recorded}): restore it (or the pecli "
-                                 "that ran it), or give another --out")
+                raise PecliError(
+                    f"the scenario '{spec.scenario}' has changed since {self.out} started "
+                    f"({changed[0]}{more}; as first run: {recorded}): restore it (or the pecli "
+                    "that ran it), or give another --out"
+                )
         self.out.mkdir(parents=True, exist_ok=True)
         (self.out / "tasks").mkdir(exist_ok=True)
         atomic_write_text(self.out / SPEC_FILE, yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
@@ -129,17 +139,25 @@ class ExperimentRunner:
 
     def _save(self, ended: str | None = None) -> None:
         spec = self.experiment.spec
-        atomic_write_json(self.out / STATE_FILE, {
-            "name": spec.name,
-            "fingerprint": spec.fingerprint(),
-            "source": self.experiment.source,
-            "driver": {"pid": os.getpid(), "host": socket.gethostname(), "started": self.session.started,
-                       "ended": ended},
-            "runs": {row.run.name: {"status": row.status, "error": row.error, "host": row.host}
-                     for row in self.rows},
-            "stages": self.stages,
-            "sessions": [*self.sessions, vars(self.session)],
-        })
+        atomic_write_json(
+            self.out / STATE_FILE,
+            {
+                "name": spec.name,
+                "fingerprint": spec.fingerprint(),
+                "source": self.experiment.source,
+                "driver": {
+                    "pid": os.getpid(),
+                    "host": socket.gethostname(),
+                    "started": self.session.started,
+                    "ended": ended,
+                },
+                "runs": {
+                    row.run.name: {"status": row.status, "error": row.error, "host": row.host} for row in self.rows
+                },
+                "stages": self.stages,
+                "sessions": [*self.sessions, vars(self.session)],
+            },
+        )
 
     def _update(self, stage: str | None = None) -> None:
         if stage is not None:
@@ -209,7 +227,9 @@ class ExperimentRunner:
                         outcome = cluster.result(ref)
                     except PecliError as exc:
                         row.status, row.error = "failed", str(exc)
-                    except Exception as exc:  # a bug, or a worker lost more often than Ray retries: keep the others going
+                    except (
+                        Exception
+                    ) as exc:  # a bug, or a worker lost more often than Ray retries: keep the others going
                         row.status = "failed"
                         row.error = f"{type(exc).__name__}: {exc} (its traceback is in Ray's logs, {RAY_LOGS})"
                     else:
@@ -242,13 +262,16 @@ class ExperimentRunner:
         if failed:
             self.stages["train"] = "failed"
             more = f" (and {len(failed) - 1} more)" if len(failed) > 1 else ""
-            raise PecliError(f"run {failed[0].run.name} failed: {failed[0].error}{more}; "
-                             "the others are saved: run the experiment again to retry")
+            raise PecliError(
+                f"run {failed[0].run.name} failed: {failed[0].error}{more}; "
+                "the others are saved: run the experiment again to retry"
+            )
         self.stages["train"] = self._train_stage()
         self._save()
 
-    def _play(self, cluster: RayCluster, name: str, players: dict, pairings: list, episodes: int,
-              seeds: int) -> TournamentResults:
+    def _play(
+        self, cluster: RayCluster, name: str, players: dict, pairings: list, episodes: int, seeds: int
+    ) -> TournamentResults:
         """One tournament into ``out/<name>`` with Ray playing the pairings not cached."""
         from pecli.tournament import run_tournament
 
@@ -265,8 +288,16 @@ class ExperimentRunner:
 
         self.stages[name] = {"pairings": len(pairings), "status": "running"}
         self._save()
-        results = run_tournament(self.experiment.scenario, players, pairings, episodes, list(range(seeds)),
-                                 self.out / name, on_result=counted, executor=cluster.play_pairings)
+        results = run_tournament(
+            self.experiment.scenario,
+            players,
+            pairings,
+            episodes,
+            list(range(seeds)),
+            self.out / name,
+            on_result=counted,
+            executor=cluster.play_pairings,
+        )
         self.stages[name]["status"] = "done"
         self._save()
         return results
@@ -318,8 +349,11 @@ class ExperimentRunner:
         model = settings.pop("model", DEFAULT_MODEL)
         scenario = self.experiment.scenario
         self._update(f"solving the HJ game ({model})")
-        _, path, _ = solve_cached(Problem.for_scenario(scenario, model), scenario.name,  # type: ignore[arg-type]
-                                  out=self.out / "hj" / f"hj-{model}.npz")
+        _, path, _ = solve_cached(
+            Problem.for_scenario(scenario, model),
+            scenario.name,  # type: ignore[arg-type]
+            out=self.out / "hj" / f"hj-{model}.npz",
+        )
         if not settings:
             return str(path.resolve())  # a solution file plays as itself, named after it
         return "hj:" + ",".join([str(path.resolve()), *(f"{key}={value}" for key, value in settings.items())])
@@ -344,9 +378,11 @@ def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dic
     kept: dict[str, dict[str, list[str]]] = {run.name: {} for run in runs}
     for run in runs:
         for role in run.roles:
-            mine = [p for p in results.players[role]  # the run's main agents (a league's exploiters only train them)
-                    if Path(p.spec).parent.parent.name == run.name and Path(p.spec).parent.name == role
-                    and p.name in scores]
+            mine = [
+                p
+                for p in results.players[role]  # the run's main agents (a league's exploiters only train them)
+                if Path(p.spec).parent.parent.name == run.name and Path(p.spec).parent.name == role and p.name in scores
+            ]
             rate = {p.name: sum(c for c, _ in scores[p.name]) / sum(n for _, n in scores[p.name]) for p in mine}
             best = sorted(mine, key=lambda p: (-rate[p.name] if role == "pursuer" else rate[p.name], p.name))
             kept[run.name][role] = [by_name[p.name].spec for p in best[:keep]]

@@ -50,8 +50,15 @@ def _run_task(run: RunSpec, zoo: str, marker: str) -> dict[str, Any]:
     # ray.cancel stops a running task as Ctrl-C would (the run commits its state), by simulating SIGINT in the
     # worker: that does nothing if the worker inherited SIGINT ignored (a driver started in the background)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    atomic_write_json(marker, {"host": socket.gethostname(), "pid": os.getpid(), "started": time.time(),
-                               "node": ray.get_runtime_context().get_node_id()})
+    atomic_write_json(
+        marker,
+        {
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "started": time.time(),
+            "node": ray.get_runtime_context().get_node_id(),
+        },
+    )
     return execute_run(run, Path(zoo))
 
 
@@ -161,9 +168,14 @@ class RayCluster:
                     except PecliError as exc:
                         yield refs[ref], exc
                     except Exception as exc:  # a worker lost for good, a MemoryError in the task: that pairing fails
-                        yield refs[ref], PecliError(f"a pairing failed on Ray ({type(exc).__name__}: "
-                                                    f"{str(exc).splitlines()[0] if str(exc) else exc}); Ray's logs are "
-                                                    "in /tmp/ray/session_latest/logs/")
+                        yield (
+                            refs[ref],
+                            PecliError(
+                                f"a pairing failed on Ray ({type(exc).__name__}: "
+                                f"{str(exc).splitlines()[0] if str(exc) else exc}); Ray's logs are "
+                                "in /tmp/ray/session_latest/logs/"
+                            ),
+                        )
         finally:
             for ref in pending:  # stopped early (Ctrl-C, an error): drop what is still queued
                 ray.cancel(ref, force=True)

@@ -59,8 +59,9 @@ class Cell:
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["capture_rate"] = round(self.capture_rate, 4)
-        data["difference"] = (None if self.paper_capture_rate is None
-                              else round(self.capture_rate - self.paper_capture_rate, 4))
+        data["difference"] = (
+            None if self.paper_capture_rate is None else round(self.capture_rate - self.paper_capture_rate, 4)
+        )
         data["fewer_episodes_than_paper"] = self.episodes < PAPER_EPISODES
         return data
 
@@ -87,12 +88,19 @@ class ExperimentReport:
             self.data = read_json(out / "tournament" / "results.json", "tournament's results")
             kept = read_json(out / KEPT_FILE, "record of kept checkpoints")
         except FileNotFoundError:
-            raise PecliError(f"{out}: the experiment has not reached its tournament yet "
-                             "(`pecli experiment status` says how far it got)") from None
-        if not (isinstance(self.data, dict) and isinstance(kept, dict)
-                and all(key in self.data for key in ("pairings", "ratings", "episodes_per_seed", "seeds"))):
-            raise PecliError(f"{out}: damaged results (tournament/results.json or {KEPT_FILE} is not what "
-                             "`pecli experiment run` writes): run it again to rewrite them")
+            raise PecliError(
+                f"{out}: the experiment has not reached its tournament yet "
+                "(`pecli experiment status` says how far it got)"
+            ) from None
+        if not (
+            isinstance(self.data, dict)
+            and isinstance(kept, dict)
+            and all(key in self.data for key in ("pairings", "ratings", "episodes_per_seed", "seeds"))
+        ):
+            raise PecliError(
+                f"{out}: damaged results (tournament/results.json or {KEPT_FILE} is not what "
+                "`pecli experiment run` writes): run it again to rewrite them"
+            )
         runs = {run.name: run for run in self.experiment.runs()}
         self.group_of_spec: dict[str, str] = {}
         learned: list[str] = []
@@ -155,22 +163,34 @@ class ExperimentReport:
         """The cells as a tournament of groups (for the heatmap and the rich table); its ratings are
         :meth:`group_ratings`'."""
         players = {role: [Player(g, g, role, f"group:{g}") for g in self.groups[role]] for role in ROLES}
-        pairings = [PairingResult(c.pursuer, c.evader, c.episodes, c.captures, c.time_mean, c.time_std)
-                    for c in self.cells]
-        return TournamentResults(scenario=self.experiment.scenario, players=players, pairings=pairings,
-                                 ratings=[r for _, _, r in self.group_ratings()],
-                                 episodes=self.data["episodes_per_seed"], seeds=self.data["seeds"])
+        pairings = [
+            PairingResult(c.pursuer, c.evader, c.episodes, c.captures, c.time_mean, c.time_std) for c in self.cells
+        ]
+        return TournamentResults(
+            scenario=self.experiment.scenario,
+            players=players,
+            pairings=pairings,
+            ratings=[r for _, _, r in self.group_ratings()],
+            episodes=self.data["episodes_per_seed"],
+            seeds=self.data["seeds"],
+        )
 
     def group_ratings(self) -> list[tuple[str, Role, Rating]]:
         """Bradley–Terry ratings of the groups from the pooled cells: ``[(group, role, rating)]``, best first
         (a group name such as "MADDPG" plays both roles, so it is rated once per role)."""
+
         def key(group: str, role: Role) -> str:
             return f"{group} ({role})"
 
-        players = {role: [Player(key(g, role), g, role, f"group:{role}:{g}") for g in self.groups[role]]
-                   for role in ROLES}
-        pairings = [PairingResult(key(c.pursuer, "pursuer"), key(c.evader, "evader"), c.episodes, c.captures,
-                                  c.time_mean, c.time_std) for c in self.cells]
+        players = {
+            role: [Player(key(g, role), g, role, f"group:{role}:{g}") for g in self.groups[role]] for role in ROLES
+        }
+        pairings = [
+            PairingResult(
+                key(c.pursuer, "pursuer"), key(c.evader, "evader"), c.episodes, c.captures, c.time_mean, c.time_std
+            )
+            for c in self.cells
+        ]
         by_key = {p.name: (p.spec, p.role) for role in ROLES for p in players[role]}
         return [(*by_key[r.name], r) for r in rate(players, pairings)]
 
@@ -178,8 +198,11 @@ class ExperimentReport:
         """Each player's exploitability within the tournament (:mod:`pecli.metagame`): how far the tournament's best
         reply moves its capture rate past the meta-game's value; empty if a pairing was not played."""
         names = {role: [r["name"] for r in self.data["ratings"] if r["role"] == role] for role in ROLES}
-        rates = {(r["pursuer"], r["evader"]): r["captures"] / r["episodes"] for r in self.data["pairings"]
-                 if isinstance(r.get("episodes"), int) and r["episodes"] > 0}
+        rates = {
+            (r["pursuer"], r["evader"]): r["captures"] / r["episodes"]
+            for r in self.data["pairings"]
+            if isinstance(r.get("episodes"), int) and r["episodes"] > 0
+        }
         if not all(names.values()) or any((p, e) not in rates for p in names["pursuer"] for e in names["evader"]):
             return {}
         matrix = np.array([[rates[p, e] for e in names["evader"]] for p in names["pursuer"]])
@@ -187,10 +210,13 @@ class ExperimentReport:
 
     def markdown(self) -> str:
         spec, grid = self.experiment.spec, self.experiment.spec.runs
-        budget = (f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
-                  f"{grid.steps_per_round or self.experiment.scenario.training.selfplay.steps_per_round:,} "
-                  "transitions per side" if set(grid.schedules) & set(SELFPLAY_SCHEDULES)
-                  else f"{grid.steps or '-'} transitions")
+        budget = (
+            f"{grid.rounds or self.experiment.scenario.training.selfplay.rounds} rounds of "
+            f"{grid.steps_per_round or self.experiment.scenario.training.selfplay.steps_per_round:,} "
+            "transitions per side"
+            if set(grid.schedules) & set(SELFPLAY_SCHEDULES)
+            else f"{grid.steps or '-'} transitions"
+        )
         if grid.cpu_hours is not None:
             budget += f" at most, or {grid.cpu_hours:g} CPU-hours per self-play run"
         title = {"I": "Table I", "II": "Table II"}.get(self.table, "results")
@@ -214,21 +240,33 @@ class ExperimentReport:
         if self.table == "II":
             lines += ["The paper's time (σ) in brackets.", ""]
         lines += self._grid(self._time_text)
-        lines += ["", "## Bradley–Terry ratings (Elo scale; pursuers and evaders on one scale)", "",
-                  "Groups (all their pairings pooled):", "", "| # | group | role | rating | ± se |",
-                  "| ---: | --- | --- | ---: | ---: |"]
+        lines += [
+            "",
+            "## Bradley–Terry ratings (Elo scale; pursuers and evaders on one scale)",
+            "",
+            "Groups (all their pairings pooled):",
+            "",
+            "| # | group | role | rating | ± se |",
+            "| ---: | --- | --- | ---: | ---: |",
+        ]
         for rank, (group, role, r) in enumerate(self.group_ratings(), start=1):
             lines.append(f"| {rank} | {group} | {role} | {r.elo:.0f} | {r.stderr:.0f} |")
         exploitability = self.exploitability()
-        lines += ["", "Models (each kept checkpoint and heuristic; exploitability: within this tournament's meta-game, "
-                  "how far its best reply here moves the player's capture rate past the game's value, "
-                  "`pecli exploit` for a best response trained on it):", "",
-                  "| # | player | group | role | rating | ± se | exploitability |",
-                  "| ---: | --- | --- | --- | ---: | ---: | ---: |"]
+        lines += [
+            "",
+            "Models (each kept checkpoint and heuristic; exploitability: within this tournament's meta-game, "
+            "how far its best reply here moves the player's capture rate past the game's value, "
+            "`pecli exploit` for a best response trained on it):",
+            "",
+            "| # | player | group | role | rating | ± se | exploitability |",
+            "| ---: | --- | --- | --- | ---: | ---: | ---: |",
+        ]
         for rank, r in enumerate(self.data["ratings"], start=1):
             value = exploitability.get(r["name"])
-            lines.append(f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
-                         f"{r['stderr']:.0f} | {'-' if value is None else f'{value:.2f}'} |")
+            lines.append(
+                f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
+                f"{r['stderr']:.0f} | {'-' if value is None else f'{value:.2f}'} |"
+            )
         lines += ["", "![capture rate per cell](table.png)", ""]
         return "\n".join(lines)
 
@@ -271,8 +309,10 @@ class ExperimentReport:
             "groups": self.groups,
             "cells": [c.to_dict() for c in self.cells],
             "group_ratings": [{**asdict(r), "name": group, "role": role} for group, role, r in self.group_ratings()],
-            "ratings": [{**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
-                        for r in self.data["ratings"]],
+            "ratings": [
+                {**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
+                for r in self.data["ratings"]
+            ],
         }
 
 

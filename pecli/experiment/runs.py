@@ -108,8 +108,9 @@ def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, i
     return seconds, unknown
 
 
-def execute_run(run: RunSpec, zoo: Path, progress: bool = False,
-                report: Callable[[str], None] = lambda line: None) -> dict[str, Any]:
+def execute_run(
+    run: RunSpec, zoo: Path, progress: bool = False, report: Callable[[str], None] = lambda line: None
+) -> dict[str, Any]:
     """Train ``run`` into ``zoo`` to the end of its budget: start it, continue it from its durable state,
     or, for a finished run, train nothing (a self-play run's averages are written if a stop left them behind).
     Returns what it did (``started``, ``resumed`` or ``finished``), with the CPU seconds of this call and the
@@ -138,15 +139,38 @@ def execute_run(run: RunSpec, zoo: Path, progress: bool = False,
         if folder.exists() and not resume:
             # stopped between creating the run folder and writing its first state: nothing was trained
             shutil.rmtree(folder)
-        SelfPlay(SelfPlayJob(scenario=run.scenario, zoo=zoo, name=run.name, seed=run.seed, resume=resume,
-                             progress=progress, cpu_hours=run.cpu_hours), report=report).run()
+        SelfPlay(
+            SelfPlayJob(
+                scenario=run.scenario,
+                zoo=zoo,
+                name=run.name,
+                seed=run.seed,
+                resume=resume,
+                progress=progress,
+                cpu_hours=run.cpu_hours,
+            ),
+            report=report,
+        ).run()
     else:
         resume = (folder / "config.yaml").is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]
-        train(TrainJob(role=run.schedule, scenario=run.scenario, opponent=opponent, zoo=zoo, name=run.name,
-                       seed=run.seed, resume=resume, progress=progress))
-    return {"did": "resumed" if resume else "started", "cpu_seconds": round(time.process_time() - cpu, 2),
-            "progress": run_progress(run, zoo).to_dict()}
+        train(
+            TrainJob(
+                role=run.schedule,
+                scenario=run.scenario,
+                opponent=opponent,
+                zoo=zoo,
+                name=run.name,
+                seed=run.seed,
+                resume=resume,
+                progress=progress,
+            )
+        )
+    return {
+        "did": "resumed" if resume else "started",
+        "cpu_seconds": round(time.process_time() - cpu, 2),
+        "progress": run_progress(run, zoo).to_dict(),
+    }
 
 
 def setting_changes(old: Any, new: dict[str, Any]) -> list[str]:
@@ -158,8 +182,11 @@ def setting_changes(old: Any, new: dict[str, Any]) -> list[str]:
     added = {key: defaults[key] for key in after.keys() & (defaults.keys() - before.keys())}  # ran at their defaults
     recorded = {**added, **before}
     shown = {key: f"{value} (its default)" for key, value in added.items()}
-    return [f"{key}: {shown.get(key, recorded[key])} -> {after.get(key, '(no such setting)')}"
-            for key in sorted(recorded) if recorded[key] != after.get(key, object())]
+    return [
+        f"{key}: {shown.get(key, recorded[key])} -> {after.get(key, '(no such setting)')}"
+        for key in sorted(recorded)
+        if recorded[key] != after.get(key, object())
+    ]
 
 
 def check_unchanged(run: RunSpec, zoo: Path) -> None:
@@ -169,5 +196,4 @@ def check_unchanged(run: RunSpec, zoo: Path) -> None:
         return
     changed = setting_changes(read_yaml(recorded), run.scenario.model_dump(mode="json"))
     if changed:
-        raise ConfigError(f"{run.name} was started with other settings ({changed[0]}): give them again, "
-                          "or another zoo")
+        raise ConfigError(f"{run.name} was started with other settings ({changed[0]}): give them again, or another zoo")

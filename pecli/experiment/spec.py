@@ -78,20 +78,30 @@ class RunGrid(_Model):
     """Every combination of belief kind, seed and schedule is one run."""
 
     kinds: list[BeliefKind] = Field(min_length=1, description="belief kinds, each trained as its own run")
-    seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] = Field(min_length=1, max_length=MAX_SEEDS,
-                                                                  description="training seeds")
-    schedules: list[Schedule] = Field(default=["selfplay"], min_length=1,
-                                      description="selfplay: both sides by the scenario's self-play (alternating by "
-                                      "default); alternating; simultaneous; league; pursuer/evader: one role against a "
-                                      "frozen opponent")
-    opponent: str | None = Field(default=None, description="frozen opponent of pursuer/evader runs (default: greedy, "
-                                 "pure-pursuit)")
+    seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] = Field(
+        min_length=1, max_length=MAX_SEEDS, description="training seeds"
+    )
+    schedules: list[Schedule] = Field(
+        default=["selfplay"],
+        min_length=1,
+        description="selfplay: both sides by the scenario's self-play (alternating by "
+        "default); alternating; simultaneous; league; pursuer/evader: one role against a "
+        "frozen opponent",
+    )
+    opponent: str | None = Field(
+        default=None, description="frozen opponent of pursuer/evader runs (default: greedy, pure-pursuit)"
+    )
     rounds: int | None = Field(default=None, ge=1, description="self-play rounds (default: the scenario's)")
     steps_per_round: int | None = Field(default=None, ge=1, description="self-play transitions per side per round")
     steps: int | None = Field(default=None, ge=1, description="budget of pursuer/evader runs (default: the scenario's)")
-    cpu_hours: float | None = Field(default=None, gt=0, le=MAX_CPU_HOURS, allow_inf_nan=False,
-                                    description="self-play runs: stop after the first round at which the run's CPU time "
-                                    "(every turn's, exploiters' included) reaches this; rounds is then a ceiling")
+    cpu_hours: float | None = Field(
+        default=None,
+        gt=0,
+        le=MAX_CPU_HOURS,
+        allow_inf_nan=False,
+        description="self-play runs: stop after the first round at which the run's CPU time "
+        "(every turn's, exploiters' included) reaches this; rounds is then a ceiling",
+    )
 
     @model_validator(mode="after")
     def _distinct(self) -> RunGrid:
@@ -101,8 +111,10 @@ class RunGrid(_Model):
                 raise ValueError(f"{key} repeats a value ({values})")
         one_role = set(self.schedules) - set(SELFPLAY_SCHEDULES)
         if not set(self.schedules) & set(SELFPLAY_SCHEDULES) and len(one_role) < 2:
-            raise ValueError(f"schedules {self.schedules} train only {one_role.pop()}s: the ranking and the tournament "
-                             "need both sides (add a self-play schedule, or the other role)")
+            raise ValueError(
+                f"schedules {self.schedules} train only {one_role.pop()}s: the ranking and the tournament "
+                "need both sides (add a self-play schedule, or the other role)"
+            )
         return self
 
 
@@ -144,8 +156,9 @@ class Experiment(_Model):
     def fingerprint(self) -> str:
         """A hash of everything that decides what the experiment computes (not its name or description;
         settings left at their defaults do not count, so a setting added to pecli later keeps old hashes)."""
-        text = json.dumps(self.model_dump(mode="json", exclude={"name", "description"}, exclude_defaults=True),
-                          sort_keys=True)
+        text = json.dumps(
+            self.model_dump(mode="json", exclude={"name", "description"}, exclude_defaults=True), sort_keys=True
+        )
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -204,9 +217,17 @@ class LoadedExperiment:
                         settings["steps"] = grid.steps
                     name = f"{kind}-s{seed}" if schedule == "selfplay" else f"{kind}-{schedule}-s{seed}"
                     scenario = with_overrides(self.scenario, settings, source=self.source)
-                    out.append(RunSpec(name=name, kind=kind, seed=seed, schedule=schedule, opponent=grid.opponent,
-                                       scenario=scenario, cpu_hours=grid.cpu_hours if schedule in SELFPLAY_SCHEDULES
-                                       else None))
+                    out.append(
+                        RunSpec(
+                            name=name,
+                            kind=kind,
+                            seed=seed,
+                            schedule=schedule,
+                            opponent=grid.opponent,
+                            scenario=scenario,
+                            cpu_hours=grid.cpu_hours if schedule in SELFPLAY_SCHEDULES else None,
+                        )
+                    )
         return out
 
     def grid_order(self, runs: list[RunSpec]) -> list[RunSpec]:
@@ -214,8 +235,14 @@ class LoadedExperiment:
         its random pairings in (runs started in that order before :meth:`runs` changed it, and a ranking
         resumed or repeated must draw the same pairings)."""
         grid = self.spec.runs
-        return sorted(runs, key=lambda run: (grid.kinds.index(run.kind), grid.seeds.index(run.seed),
-                                             grid.schedules.index(run.schedule)))
+        return sorted(
+            runs,
+            key=lambda run: (
+                grid.kinds.index(run.kind),
+                grid.seeds.index(run.seed),
+                grid.schedules.index(run.schedule),
+            ),
+        )
 
 
 def experiment_from_dict(data: object, source: str, base: Path | None = None) -> LoadedExperiment:
@@ -237,7 +264,9 @@ def experiment_from_dict(data: object, source: str, base: Path | None = None) ->
         raise ConfigError(f"{source}: scenario: {exc}") from None
     if scenario_path.is_file():  # a scenario file: recorded by its absolute path, read from wherever --out is
         spec = spec.model_copy(update={"scenario": str(scenario_path.resolve())})
-    flat = {key: value for key, value in dotted(dict(spec.training)).items() if value != {}}  # an empty section: nothing
+    flat = {
+        key: value for key, value in dotted(dict(spec.training)).items() if value != {}
+    }  # an empty section: nothing
     scenario = with_overrides(scenario, flat, source=source)
     _check_players(spec, scenario, source)
     return LoadedExperiment(spec, scenario, source)
@@ -252,21 +281,28 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
     one_role = [s for s in spec.runs.schedules if s not in SELFPLAY_SCHEDULES]
     if spec.runs.opponent is not None and one_role:
         if len(one_role) > 1:
-            raise ConfigError(f"{source}: runs.opponent: one opponent cannot train both pursuers and evaders "
-                              "(put the pursuer and the evader runs in two experiments)")
+            raise ConfigError(
+                f"{source}: runs.opponent: one opponent cannot train both pursuers and evaders "
+                "(put the pursuer and the evader runs in two experiments)"
+            )
         role = "evader" if one_role[0] == "pursuer" else "pursuer"
         name = spec.runs.opponent
         if name in BUILTINS and role not in BUILTINS[name].roles:
-            raise ConfigError(f"{source}: runs.opponent: '{name}' cannot play {role} (for {role}: "
-                              f"{', '.join(builtin_names(role))})")
+            raise ConfigError(
+                f"{source}: runs.opponent: '{name}' cannot play {role} (for {role}: {', '.join(builtin_names(role))})"
+            )
     for i, player in enumerate(spec.tournament.players):
         family = family_of(player)
         if family == "hj" and not (scenario.pursuer.kind == scenario.evader.kind == "point_mass"):
-            raise ConfigError(f"{source}: tournament.players.{i}: hj plays point mass vs point mass only, not the "
-                              f"game of scenario '{scenario.name}'")
+            raise ConfigError(
+                f"{source}: tournament.players.{i}: hj plays point mass vs point mass only, not the "
+                f"game of scenario '{scenario.name}'"
+            )
         if family is None and player not in BUILTINS and ":" not in player and not Path(player).exists():
-            raise ConfigError(f"{source}: tournament.players.{i}: unknown player '{player}' (a built-in policy such "
-                              f"as {', '.join(builtin_names()[:4])}, a family such as hj, a file or module:Class)")
+            raise ConfigError(
+                f"{source}: tournament.players.{i}: unknown player '{player}' (a built-in policy such "
+                f"as {', '.join(builtin_names()[:4])}, a family such as hj, a file or module:Class)"
+            )
         try:
             check_saved_players(player, scenario)  # a checkpoint of another game, or a folder of none
         except PecliError as exc:
@@ -276,8 +312,12 @@ def _check_players(spec: Experiment, scenario: Scenario, source: str) -> None:
 def experiment_path(name_or_path: str | Path) -> Path:
     """The YAML file of an experiment given as a file or a built-in name (:func:`builtin_experiments`)."""
     path = Path(name_or_path)
-    if not path.is_file() and path.suffix not in (".yaml", ".yml") and len(path.parts) == 1 \
-            and str(name_or_path) in builtin_experiments():
+    if (
+        not path.is_file()
+        and path.suffix not in (".yaml", ".yml")
+        and len(path.parts) == 1
+        and str(name_or_path) in builtin_experiments()
+    ):
         path = builtin_experiment_dir() / f"{name_or_path}.yaml"
     if not path.is_file():
         known = ", ".join(builtin_experiments())

@@ -83,8 +83,8 @@ def check_parity(
     seed: int = 0,
     opponent: str | None = None,
 ) -> ParityReport:
-    """Record ``checkpoint``'s games against ``opponent`` (a policy string; default :data:`~pecli.roles.DEFAULT_OPPONENT`)
-    and replay them through ``exported``."""
+    """Record ``checkpoint``'s games against ``opponent`` (a policy string;
+    default :data:`~pecli.roles.DEFAULT_OPPONENT`) and replay them through ``exported``."""
     opponent = opponent or DEFAULT_OPPONENT[checkpoint.role]
     other = resolve_policy(opponent, opponent_of(checkpoint.role), scenario)
     observations, actions = record_games(scenario, checkpoint, other, episodes, seed)

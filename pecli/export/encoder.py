@@ -75,8 +75,10 @@ class SIEncoder(nn.Module):
         """The own-frame opponent block, in ``ObservationCodec._relative``'s arithmetic."""
         k, m = self.k, self.m
         own, opp = si[..., :k], si[..., k : k + m]
-        delta = th.cat([opp[..., 0:2] - own[..., 0:2], self._velocity(opp, self.opp_car) - self._velocity(own, self.own_car)],
-                       dim=-1)  # (dx, dy, dvx, dvy)
+        delta = th.cat(
+            [opp[..., 0:2] - own[..., 0:2], self._velocity(opp, self.opp_car) - self._velocity(own, self.own_car)],
+            dim=-1,
+        )  # (dx, dy, dvx, dvy)
         if self.own_car:  # rotate both pairs into the body frame: (c x + s y, c y - s x)
             c, s = th.cos(own[..., 4:5]), th.sin(own[..., 4:5])
             delta = c * delta + s * (delta[..., self.swap] * self.swap_sign)

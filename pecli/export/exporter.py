@@ -63,8 +63,10 @@ def require_finite(learned: LearnedPolicy, checkpoint: Path) -> None:
     """:class:`ExportError` when the actor (belief included) holds a NaN or an infinity: it would command NaN."""
     broken = [name for name, p in learned.actor.named_parameters() if not th.isfinite(p).all()]
     if broken:
-        raise ExportError(f"{checkpoint}: {len(broken)} weight tensors of the network are NaN or infinite "
-                          f"(e.g. {broken[0]}): a broken policy is not exported (its training diverged)")
+        raise ExportError(
+            f"{checkpoint}: {len(broken)} weight tensors of the network are NaN or infinite "
+            f"(e.g. {broken[0]}): a broken policy is not exported (its training diverged)"
+        )
 
 
 def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[PolicyGraph, bytes]:
@@ -85,8 +87,10 @@ def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[Po
     except (onnx.checker.ValidationError, onnx.shape_inference.InferenceError) as exc:
         raise ExportError(f"the exported graph fails onnx.checker: {exc}") from None
     model.producer_name, model.producer_version = "pecli", __version__
-    model.doc_string = (f"pecli {learned.role} ({learned.meta.belief} belief): SI state estimates in, "
-                        "SI command out; see the sidecar .onnx.json")
+    model.doc_string = (
+        f"pecli {learned.role} ({learned.meta.belief} belief): SI state estimates in, "
+        "SI command out; see the sidecar .onnx.json"
+    )
     return graph, model.SerializeToString()
 
 
@@ -148,14 +152,17 @@ def check_export(
     scenario = exported_scenario(sidecar, source=str(sidecar_path(model)))
     meta = read_metadata(checkpoint)
     if meta.scenario_hash != scenario.fingerprint():
-        raise ExportError(f"{sidecar_path(model)}: its scenario ({scenario.fingerprint()}) is not the one "
-                          f"{checkpoint.name} was trained on ({meta.scenario_hash}): the sidecar was edited; "
-                          "export again")
+        raise ExportError(
+            f"{sidecar_path(model)}: its scenario ({scenario.fingerprint()}) is not the one "
+            f"{checkpoint.name} was trained on ({meta.scenario_hash}): the sidecar was edited; "
+            "export again"
+        )
     learned = LearnedPolicy.load(checkpoint, exported_model.role, scenario)  # type: ignore[arg-type]
     require_finite(learned, checkpoint)
     if differences := sidecar_differences(sidecar, scenario, learned.meta, learned.draws):
         more = f" (and {len(differences) - 1} more)" if len(differences) > 1 else ""
-        raise ExportError(f"{sidecar_path(model)} does not match its scenario and checkpoint: {differences[0]}{more}; "
-                          "a robot would act on the wrong numbers: export again")
+        raise ExportError(
+            f"{sidecar_path(model)} does not match its scenario and checkpoint: {differences[0]}{more}; "
+            "a robot would act on the wrong numbers: export again"
+        )
     return check_parity(ExportedPolicy(exported_model, scenario), learned, scenario, episodes, seed, opponent)
-

@@ -78,7 +78,9 @@ class PolicyGraph(nn.Module):
 
     @property
     def input_names(self) -> list[str]:
-        return ["obs"] + (["history"] if self.belief is not None else []) + (["uniform", "normal"] if self.mixed else [])
+        return (
+            ["obs"] + (["history"] if self.belief is not None else []) + (["uniform", "normal"] if self.mixed else [])
+        )
 
     @property
     def output_names(self) -> list[str]:
@@ -100,9 +102,15 @@ class PolicyGraph(nn.Module):
             rows = self.encoder(th.cat([obs, history], dim=1))
             features, window = rows[:, :stack].flatten(1), rows[:, stack:]
             mixture = Mixture(*self.belief(window))
-            points = mixture.sample_with(uniform, normal) if self.mixed else mixture.mean()  # as BeliefModel.features_of
+            points = (
+                mixture.sample_with(uniform, normal) if self.mixed else mixture.mean()
+            )  # as BeliefModel.features_of
             features = th.cat([features, self.frame(points, window[:, -1]).flatten(1)], dim=1)
-            beliefs = (mixture.weights, mixture.means.double() * self.arena_half, mixture.stds.double() * self.arena_half)
+            beliefs = (
+                mixture.weights,
+                mixture.means.double() * self.arena_half,
+                mixture.stds.double() * self.arena_half,
+            )
         action = self.act(features)
         return (action.double() * self.limits, action, *beliefs)
 

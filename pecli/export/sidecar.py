@@ -29,31 +29,60 @@ def _fields(pairs: list[tuple[str, str]]) -> list[dict[str, str]]:
     return [{"name": name, "unit": unit} for name, unit in pairs]
 
 
-def io_layout(graph: PolicyGraph, layout: SILayout, meta: CheckpointMeta, draws: int) -> dict[str, list[dict[str, Any]]]:
+def io_layout(
+    graph: PolicyGraph, layout: SILayout, meta: CheckpointMeta, draws: int
+) -> dict[str, list[dict[str, Any]]]:
     """The graph's inputs and outputs: name, dtype, shape (``"batch"`` first) and meaning."""
     window = -(-meta.history_length // meta.history_stride)
     inputs = {
-        "obs": {"dtype": "float64", "shape": ["batch", meta.frame_stack, layout.dim],
-                "meaning": "SI rows of the last frame_stack decision ticks, oldest first (see 'row')"},
-        "history": {"dtype": "float64", "shape": ["batch", window, layout.dim],
-                    "meaning": f"every {meta.history_stride}th SI row of the last {meta.history_length} ticks, "
-                               "oldest first, newest = this tick; zero rows before the game's start"},
-        "uniform": {"dtype": "float32", "shape": ["batch", draws],
-                    "meaning": "uniform [0, 1) numbers that pick the mixture components of the belief's draws"},
-        "normal": {"dtype": "float32", "shape": ["batch", draws, 2],
-                   "meaning": "standard normal numbers of the belief's draws"},
+        "obs": {
+            "dtype": "float64",
+            "shape": ["batch", meta.frame_stack, layout.dim],
+            "meaning": "SI rows of the last frame_stack decision ticks, oldest first (see 'row')",
+        },
+        "history": {
+            "dtype": "float64",
+            "shape": ["batch", window, layout.dim],
+            "meaning": f"every {meta.history_stride}th SI row of the last {meta.history_length} ticks, "
+            "oldest first, newest = this tick; zero rows before the game's start",
+        },
+        "uniform": {
+            "dtype": "float32",
+            "shape": ["batch", draws],
+            "meaning": "uniform [0, 1) numbers that pick the mixture components of the belief's draws",
+        },
+        "normal": {
+            "dtype": "float32",
+            "shape": ["batch", draws, 2],
+            "meaning": "standard normal numbers of the belief's draws",
+        },
     }
     own_car = layout.own.has_heading
     outputs = {
-        "command": {"dtype": "float64", "shape": ["batch", 2], "fields": _fields(COMMAND_FIELDS[own_car]),
-                    "meaning": "the command in physical units (the action times command_limits)"},
-        "action": {"dtype": "float32", "shape": ["batch", 2],
-                   "meaning": "the actor's output in [-1, 1], as the simulator takes it"},
+        "command": {
+            "dtype": "float64",
+            "shape": ["batch", 2],
+            "fields": _fields(COMMAND_FIELDS[own_car]),
+            "meaning": "the command in physical units (the action times command_limits)",
+        },
+        "action": {
+            "dtype": "float32",
+            "shape": ["batch", 2],
+            "meaning": "the actor's output in [-1, 1], as the simulator takes it",
+        },
         "belief_weights": {"dtype": "float32", "shape": ["batch", "K"], "meaning": "mixture weights"},
-        "belief_means": {"dtype": "float64", "shape": ["batch", "K", 2], "unit": "m",
-                         "meaning": "component means of the opponent's position, world frame"},
-        "belief_stds": {"dtype": "float64", "shape": ["batch", "K", 2], "unit": "m",
-                        "meaning": "component standard deviations along x and y"},
+        "belief_means": {
+            "dtype": "float64",
+            "shape": ["batch", "K", 2],
+            "unit": "m",
+            "meaning": "component means of the opponent's position, world frame",
+        },
+        "belief_stds": {
+            "dtype": "float64",
+            "shape": ["batch", "K", 2],
+            "unit": "m",
+            "meaning": "component standard deviations along x and y",
+        },
     }
     return {
         "inputs": [{"name": name, **inputs[name]} for name in graph.input_names],
@@ -84,8 +113,11 @@ def build_sidecar(
             "sha256": file_sha256(checkpoint),
             **{key: getattr(meta, key) for key in ("run", "steps", "episodes", "algo", "seed", "pecli_version")},
         },
-        "scenario": {"name": scenario.name, "fingerprint": scenario.fingerprint(),
-                     "config": scenario.model_dump(mode="json")},
+        "scenario": {
+            "name": scenario.name,
+            "fingerprint": scenario.fingerprint(),
+            "config": scenario.model_dump(mode="json"),
+        },
         **controls,
         **io_layout(graph, layout, meta, draws),
     }
@@ -122,8 +154,12 @@ def robot_fields(scenario: Scenario, meta: CheckpointMeta, draws: int) -> dict[s
 def sidecar_differences(sidecar: dict[str, Any], scenario: Scenario, meta: CheckpointMeta, draws: int) -> list[str]:
     """Where ``sidecar`` disagrees with what ``scenario`` and the checkpoint's ``meta`` say, e.g.
     ``"sensor.fov_rad is 1.0, not 2.0944"``: a sidecar edited by hand, or put beside another model."""
-    expected = {"role": meta.role, "belief": meta.belief, "scenario": {"fingerprint": scenario.fingerprint()},
-                **robot_fields(scenario, meta, draws)}
+    expected = {
+        "role": meta.role,
+        "belief": meta.belief,
+        "scenario": {"fingerprint": scenario.fingerprint()},
+        **robot_fields(scenario, meta, draws),
+    }
     return _differences(sidecar, expected, "")
 
 
@@ -131,8 +167,11 @@ def _differences(found: Any, expected: Any, where: str) -> list[str]:
     if isinstance(expected, dict):
         if not isinstance(found, dict):
             return [f"{where} is {found!r}, not a section"]
-        return [d for key, value in expected.items()
-                for d in _differences(found.get(key), value, f"{where}.{key}".lstrip("."))]
+        return [
+            d
+            for key, value in expected.items()
+            for d in _differences(found.get(key), value, f"{where}.{key}".lstrip("."))
+        ]
     if isinstance(expected, list) and isinstance(found, list) and len(found) == len(expected):
         return [d for i, (f, e) in enumerate(zip(found, expected)) for d in _differences(f, e, f"{where}[{i}]")]
     same = found == expected

@@ -73,9 +73,7 @@ class Game:
         self.speed_scale: dict[Role, float] = {role: 1.0 for role in ROLES}
         self._half = scenario.arena.half
         # normalisation of the privileged state, per row (pursuer's rows then evader's)
-        self._state_inverse_scale = {
-            role: (1.0 / self.dynamics[role].scale(*self._half))[:, None] for role in ROLES
-        }
+        self._state_inverse_scale = {role: (1.0 / self.dynamics[role].scale(*self._half))[:, None] for role in ROLES}
         # row-wise internal states (rows, n): the SI state, then any cached rows (a car's cos/sin psi)
         self.pursuer = np.zeros((self.dynamics["pursuer"].rows, n))
         self.evader = np.zeros((self.dynamics["evader"].rows, n))
@@ -140,7 +138,9 @@ class Game:
         choice = np.where(valid.any(axis=0), valid.argmax(axis=0), dist.argmax(axis=0))
         cols = np.arange(idx.size)
         placements: tuple[tuple[Role, tuple[np.ndarray, np.ndarray], np.ndarray], ...] = (
-            ("pursuer", (px, py), u[-2]), ("evader", (ex, ey), u[-1]))
+            ("pursuer", (px, py), u[-2]),
+            ("evader", (ex, ey), u[-1]),
+        )
         for role, (x, y), yaw in placements:
             rows, dynamics = getattr(self, role), self.dynamics[role]
             start = np.zeros((dynamics.state_dim, idx.size))

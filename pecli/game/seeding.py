@@ -28,9 +28,10 @@ def _splitmix64(z: np.ndarray) -> np.ndarray:
 def counter_uniform(seed: int, slots: np.ndarray, episodes: np.ndarray, draws: int) -> np.ndarray:
     """Uniform numbers in [0, 1), shape ``(draws, len(slots))``, a pure function of the counters."""
     with np.errstate(over="ignore"):
-        base = _splitmix64(np.uint64(seed % 2**64) ^ _splitmix64(
-            slots.astype(np.uint64) * _SLOT ^ episodes.astype(np.uint64) * _EPISODE
-        ))
+        base = _splitmix64(
+            np.uint64(seed % 2**64)
+            ^ _splitmix64(slots.astype(np.uint64) * _SLOT ^ episodes.astype(np.uint64) * _EPISODE)
+        )
         counters = base[None, :] + np.arange(1, draws + 1, dtype=np.uint64)[:, None] * _GOLDEN
         bits = _splitmix64(counters)
     return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)

@@ -64,12 +64,18 @@ class SILayout:
     def fields(self) -> list[Field]:
         """The columns of one row, with units."""
         own = [Field(f"own.{label}", UNITS[label], "own state, world frame") for label in self.own.labels]
-        opp = [Field(f"opponent.{label}", UNITS[label], "opponent state, world frame; ignored unless seen")
-               for label in self.opp.labels]
+        opp = [
+            Field(f"opponent.{label}", UNITS[label], "opponent state, world frame; ignored unless seen")
+            for label in self.opp.labels
+        ]
         return [
             *own,
             *opp,
-            Field("seen", "1", "+1 the opponent is seen, -1 not (only the sign counts); 0 only in the history window's padding"),
+            Field(
+                "seen",
+                "1",
+                "+1 the opponent is seen, -1 not (only the sign counts); 0 only in the history window's padding",
+            ),
             Field("time", "s", "time since the episode started"),
         ]
 
@@ -114,8 +120,14 @@ class SILayout:
         own_rows, opp_rows = self.own.from_state(own), self.opp.from_state(opp)
         flag = si[:, self.seen_index]
         obs = np.array(
-            self.codec.encode(own_rows, opp_rows, opp[0] - own[0], opp[1] - own[1], flag > 0,
-                              si[:, self.time_index] * (1.0 / self.horizon_s)),
+            self.codec.encode(
+                own_rows,
+                opp_rows,
+                opp[0] - own[0],
+                opp[1] - own[1],
+                flag > 0,
+                si[:, self.time_index] * (1.0 / self.horizon_s),
+            ),
             dtype=np.float32,
         )
         obs[:, self.seen_index] = np.sign(flag)

@@ -85,12 +85,24 @@ class Grid:
         return "x".join(str(n) for n in self.shape)
 
     # ------------------------------------------------------------------ states
-    def points(self, pursuer_pos: np.ndarray, pursuer_vel: np.ndarray, evader_pos: np.ndarray,
-               evader_vel: np.ndarray) -> np.ndarray:
+    def points(
+        self, pursuer_pos: np.ndarray, pursuer_vel: np.ndarray, evader_pos: np.ndarray, evader_vel: np.ndarray
+    ) -> np.ndarray:
         """Grid coordinates ``(n, d)`` of states given as world positions (m) and velocities (m/s), each ``(n, 2)``."""
         if self.model == "abs8d":
-            return np.stack([pursuer_vel[:, 0], evader_vel[:, 0], pursuer_pos[:, 0], evader_pos[:, 0],
-                             pursuer_vel[:, 1], evader_vel[:, 1], pursuer_pos[:, 1], evader_pos[:, 1]], axis=1)
+            return np.stack(
+                [
+                    pursuer_vel[:, 0],
+                    evader_vel[:, 0],
+                    pursuer_pos[:, 0],
+                    evader_pos[:, 0],
+                    pursuer_vel[:, 1],
+                    evader_vel[:, 1],
+                    pursuer_pos[:, 1],
+                    evader_pos[:, 1],
+                ],
+                axis=1,
+            )
         r = evader_pos - pursuer_pos
         if self.model == "rel4d":
             w = evader_vel - pursuer_vel
@@ -106,7 +118,8 @@ class Grid:
 
     # ------------------------------------------------------------------ interpolation
     def interpolate(self, values: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """Multilinear interpolation of ``values`` (shape :attr:`shape`) at ``points`` ``(n, d)``, clamped to the grid."""
+        """Multilinear interpolation of ``values`` (shape :attr:`shape`) at ``points`` ``(n, d)``,
+        clamped to the grid."""
         half = len(self.x_axes)
         return self.interpolate_pairs(values, points[:, None, :half], points[:, None, half:])[:, 0, 0]
 
@@ -180,7 +193,10 @@ def make_grid(
         else:
             axes = [Axis(f"vp_{label}", -vp, vp, n_vel), Axis(f"ve_{label}", -ve, ve, n_vel)]
         if model == "abs8d":
-            axes += [Axis(f"p_{label}", -extent / 2, extent / 2, n_pos), Axis(f"e_{label}", -extent / 2, extent / 2, n_pos)]
+            axes += [
+                Axis(f"p_{label}", -extent / 2, extent / 2, n_pos),
+                Axis(f"e_{label}", -extent / 2, extent / 2, n_pos),
+            ]
         else:
             axes.append(Axis(f"r_{label}", -extent, extent, n_pos))
         halves.append(tuple(axes))

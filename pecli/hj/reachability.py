@@ -42,7 +42,8 @@ def solve_with_hj_reachability(problem: Problem, accuracy: str = "very_high") ->
     game, grid = problem.game, problem.grid
 
     class Relative(hj.ControlAndDisturbanceAffineDynamics):
-        """State ``(w_x, r_x, w_y, r_y)``; control: the pursuer's acceleration (min), disturbance: the evader's (max)."""
+        """State ``(w_x, r_x, w_y, r_y)``; control: the pursuer's acceleration (min),
+        disturbance: the evader's (max)."""
 
         def __init__(self) -> None:
             p = game.pursuer_a_max * jnp.ones(2)

@@ -111,20 +111,34 @@ class Solution:
                 values = data["values"]
                 steps = data["capture_steps"] if "capture_steps" in data.files else None
             problem = Problem.from_dict(meta.pop("problem"))
-        except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RecursionError, MemoryError,
-                zipfile.BadZipFile, ConfigError) as exc:
+        except (
+            OSError,
+            EOFError,
+            ValueError,
+            KeyError,
+            TypeError,
+            AttributeError,
+            RecursionError,
+            MemoryError,
+            zipfile.BadZipFile,
+            ConfigError,
+        ) as exc:
             raise SolutionError(f"{path}: not a readable HJ solution ({type(exc).__name__}: {exc})") from None
         if meta.pop("key", None) != problem.key():
             raise SolutionError(f"{path}: was made by another solver version; solve again")
         for name, array in (("values", values), ("capture steps", steps)):
             if array is not None and array.shape != problem.grid.shape:
-                raise SolutionError(f"{path}: {name} of shape {array.shape} do not fit the grid {problem.grid.describe()}")
+                raise SolutionError(
+                    f"{path}: {name} of shape {array.shape} do not fit the grid {problem.grid.describe()}"
+                )
         if values.dtype.kind != "f" or not np.isfinite(values).all():
-            raise SolutionError(f"{path}: the values are not all finite numbers (NaN or infinite): the file is "
-                                "damaged; solve again")
+            raise SolutionError(
+                f"{path}: the values are not all finite numbers (NaN or infinite): the file is damaged; solve again"
+            )
         if steps is not None and (steps.dtype.kind != "u" or steps.max(initial=0) > problem.steps + 1):
-            raise SolutionError(f"{path}: the capture steps do not fit the horizon of {problem.steps}: the file is "
-                                "damaged; solve again")
+            raise SolutionError(
+                f"{path}: the capture steps do not fit the horizon of {problem.steps}: the file is damaged; solve again"
+            )
         meta.pop("pecli", None)
         return cls(problem=problem, values=values, meta=meta, capture_steps=steps)
 

@@ -78,7 +78,9 @@ def capture_target(grid: Grid, capture_distance: float, dt: float | None = None)
 def catmull_rom(t: np.ndarray) -> np.ndarray:
     """Weights ``(4, n)`` of the nodes ``i-1, i, i+1, i+2`` for a point at ``i + t``, ``t`` in [0, 1]."""
     t2, t3 = t * t, t * t * t
-    return np.stack([-0.5 * t + t2 - 0.5 * t3, 1.0 - 2.5 * t2 + 1.5 * t3, 0.5 * t + 2.0 * t2 - 1.5 * t3, 0.5 * (t3 - t2)])
+    return np.stack(
+        [-0.5 * t + t2 - 0.5 * t3, 1.0 - 2.5 * t2 + 1.5 * t3, 0.5 * t + 2.0 * t2 - 1.5 * t3, 0.5 * (t3 - t2)]
+    )
 
 
 class PositionShift:
@@ -98,7 +100,7 @@ class PositionShift:
     def _matrix(grid: Grid, axes: tuple, dt: float) -> sparse.csr_matrix:
         moves, _, _ = _moves(grid, axes, dt)
         shape = tuple(a.n for a in axes)
-        strides = np.array([int(np.prod(shape[k + 1:])) for k in range(len(shape))])
+        strides = np.array([int(np.prod(shape[k + 1 :])) for k in range(len(shape))])
         rows = np.arange(int(np.prod(shape)))
         columns, weights = rows[None, :], np.ones((1, rows.size), np.float32)
         for k, moved in moves:  # the tensor product of one Catmull–Rom stencil per moved axis
@@ -217,8 +219,10 @@ def solve_with_capture_steps(
     """
     nodes = int(np.prod(problem.grid.shape))
     if nodes > MAX_NODES:
-        raise ConfigError(f"the grid {problem.grid.describe()} has {nodes:,} nodes; the solver keeps several "
-                          f"float32 copies, so at most {MAX_NODES:,} (about 8 GB) are allowed: use a coarser --grid")
+        raise ConfigError(
+            f"the grid {problem.grid.describe()} has {nodes:,} nodes; the solver keeps several "
+            f"float32 copies, so at most {MAX_NODES:,} (about 8 GB) are allowed: use a coarser --grid"
+        )
     step = Iteration(problem)
     values = capture_target(problem.grid, problem.game.capture_distance)
     steps = np.zeros(values.shape, capture_steps_dtype(problem.steps))

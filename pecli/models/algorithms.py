@@ -133,8 +133,10 @@ def torch_device(name: str) -> th.device:
         raise PecliError(f"unknown device '{name}' (use cpu, cuda or auto)") from None
     if device.type == "cuda":
         if not th.cuda.is_available():
-            raise PecliError(f"--device {name}: this machine has no CUDA device that torch can use "
-                             f"(torch {th.__version__}); use --device cpu or auto")
+            raise PecliError(
+                f"--device {name}: this machine has no CUDA device that torch can use "
+                f"(torch {th.__version__}); use --device cpu or auto"
+            )
         if device.index is not None and device.index >= th.cuda.device_count():
             raise PecliError(f"--device {name}: this machine has {th.cuda.device_count()} CUDA device(s)")
     elif device.type != "cpu":

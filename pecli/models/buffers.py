@@ -74,7 +74,7 @@ class NStepDictReplayBuffer(DictReplayBuffer):
             next_observations={key: self.to_torch(o) for key, o in next_obs.items()},
             dones=self.to_torch(dones.reshape(-1, 1)),
             rewards=self.to_torch(returns.astype(np.float32)),
-            discounts=self.to_torch((self.gamma ** used).astype(np.float32).reshape(-1, 1)),
+            discounts=self.to_torch((self.gamma**used).astype(np.float32).reshape(-1, 1)),
         )
 
 
@@ -99,5 +99,6 @@ class ConcatDictReplayBuffer(NStepDictReplayBuffer):
 
     def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> DictReplayBufferSamples:  # type: ignore[override]
         samples = super()._get_samples(batch_inds, env)
-        return samples._replace(observations=TensorDict(samples.observations),
-                                next_observations=TensorDict(samples.next_observations))
+        return samples._replace(
+            observations=TensorDict(samples.observations), next_observations=TensorDict(samples.next_observations)
+        )

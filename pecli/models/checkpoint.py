@@ -48,8 +48,11 @@ def _mlp(widths: list[int], inputs: int = 1, outputs: int = 1) -> int:
 
 
 def _widths(value: Any, what: str) -> list[int]:
-    if not isinstance(value, list) or len(value) > MAX_DEPTH or not all(
-            isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= MAX_WIDTH for w in value):
+    if (
+        not isinstance(value, list)
+        or len(value) > MAX_DEPTH
+        or not all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= MAX_WIDTH for w in value)
+    ):
         raise ZooError(f"its metadata's {what} is not a list of at most {MAX_DEPTH} layers of 1 to {MAX_WIDTH} units")
     return value
 
@@ -93,8 +96,10 @@ def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
     except ZooError as exc:
         raise ZooError(f"{path}: {exc}") from None
     if least > max(size, SMALL_NETWORK_BYTES):  # a small mismatch is named layer by layer once the weights load
-        raise ZooError(f"{path}: its metadata describes a network of at least {least:,} bytes of weights, more "
-                       f"than its {size:,} bytes hold (edited or damaged metadata)")
+        raise ZooError(
+            f"{path}: its metadata describes a network of at least {least:,} bytes of weights, more "
+            f"than its {size:,} bytes hold (edited or damaged metadata)"
+        )
 
 
 def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cpu") -> Any:
@@ -104,8 +109,9 @@ def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cp
     try:
         with warnings.catch_warnings():  # torch warns about pickle protocols before refusing
             warnings.simplefilter("ignore")
-            return th.load(io.BytesIO(source) if isinstance(source, bytes) else source, map_location=device,
-                           weights_only=True)
+            return th.load(
+                io.BytesIO(source) if isinstance(source, bytes) else source, map_location=device, weights_only=True
+            )
     except OSError as exc:
         raise ZooError(f"{name}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
@@ -123,8 +129,9 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
         with zipfile.ZipFile(path) as archive:
             members = [info for info in archive.infolist() if info.filename.endswith(".pth")]
             if sum(info.file_size for info in members) > MAX_WEIGHTS_BYTES:
-                raise ZooError(f"{path}: its weights unpack to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli "
-                               "checkpoint")
+                raise ZooError(
+                    f"{path}: its weights unpack to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli checkpoint"
+                )
             entries = {info.filename: archive.read(info) for info in members}
     except zipfile.BadZipFile:
         raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None
@@ -143,9 +150,13 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
 
 def spaces_of(meta: CheckpointMeta, scenario: Scenario) -> tuple[spaces.Dict, spaces.Box]:
     """The observation and action spaces a checkpoint's policy was built for, from its metadata."""
-    training = scenario.training.model_copy(update={
-        "frame_stack": meta.frame_stack, "history_length": meta.history_length, "history_stride": meta.history_stride,
-    })
+    training = scenario.training.model_copy(
+        update={
+            "frame_stack": meta.frame_stack,
+            "history_length": meta.history_length,
+            "history_stride": meta.history_stride,
+        }
+    )
     with_belief = meta.belief != "none"
     space = observation_space(Game(scenario, n=1), meta.role, training, history=with_belief)
     if with_belief:
@@ -161,7 +172,9 @@ def build_policy(meta: CheckpointMeta, scenario: Scenario, device: str = "cpu") 
     if meta.belief != "none":
         if not meta.belief_kwargs:
             raise ZooError(f"metadata of a '{meta.belief}' checkpoint without its belief_kwargs")
-        kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": meta.belief_kwargs})
+        kwargs.update(
+            features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": meta.belief_kwargs}
+        )
     observation, action = spaces_of(meta, scenario)
     try:
         return algorithm.policy(observation, action, lambda _: 0.0, **kwargs).to(device)
@@ -169,8 +182,10 @@ def build_policy(meta: CheckpointMeta, scenario: Scenario, device: str = "cpu") 
         raise ZooError(f"its metadata describes no network pecli can build ({type(exc).__name__}: {exc})") from None
 
 
-_SIZE_MISMATCH = re.compile(r"size mismatch for ([\w.]+): copying a param with shape torch\.Size\((\[[^\]]*\])\) "
-                            r"from checkpoint, the shape in current model is torch\.Size\((\[[^\]]*\])\)")
+_SIZE_MISMATCH = re.compile(
+    r"size mismatch for ([\w.]+): copying a param with shape torch\.Size\((\[[^\]]*\])\) "
+    r"from checkpoint, the shape in current model is torch\.Size\((\[[^\]]*\])\)"
+)
 
 
 def _mismatch(exc: RuntimeError) -> str:
@@ -198,8 +213,10 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
     unless the checkpoint predates pecli's network metadata and the user trusts it."""
     if not meta.policy_kwargs:
         if not trusted():
-            raise untrusted(path, "it was written before pecli described networks in its metadata, "
-                                           "so only unpickling can rebuild it")
+            raise untrusted(
+                path,
+                "it was written before pecli described networks in its metadata, so only unpickling can rebuild it",
+            )
         _old_module_names()
         try:
             return get_algorithm(meta.algo).cls.load(path, device=device).policy
@@ -214,8 +231,10 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
     try:
         policy.load_state_dict(params["policy"], strict=True)
     except RuntimeError as exc:
-        raise ZooError(f"{path}: its metadata ({Path(path).with_suffix('.json').name}) does not describe its network: "
-                       f"{_mismatch(exc)}") from None
+        raise ZooError(
+            f"{path}: its metadata ({Path(path).with_suffix('.json').name}) does not describe its network: "
+            f"{_mismatch(exc)}"
+        ) from None
     policy.set_training_mode(False)
     return policy
 
@@ -227,8 +246,9 @@ def restore_model(model: BaseAlgorithm, path: str | Path) -> None:
     try:
         model.set_parameters(params, exact_match=True, device=model.device)
     except (RuntimeError, ValueError, KeyError) as exc:
-        raise ZooError(f"{path}: does not fit the run's model: {_mismatch(exc) if isinstance(exc, RuntimeError) else exc}"
-                       ) from None
+        raise ZooError(
+            f"{path}: does not fit the run's model: {_mismatch(exc) if isinstance(exc, RuntimeError) else exc}"
+        ) from None
     for name in model._get_torch_save_params()[1]:  # e.g. SAC's log_ent_coef
         if variables and variables.get(name) is not None:
             target = model

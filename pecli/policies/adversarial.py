@@ -108,9 +108,13 @@ class _Evader(HeuristicPolicy):
             target = view.own_pos + direction
             steer = pure_pursuit_steering(view, target, self.params, self.scenario.dt)
             moving = np.any(direction != 0.0, axis=1)
-            return np.stack([np.where(moving, steer, 0.0),
-                             speed_command(view, np.where(moving, self.params.v_max, 0.0), self.params,
-                                           self.scenario.dt)], axis=1)
+            return np.stack(
+                [
+                    np.where(moving, steer, 0.0),
+                    speed_command(view, np.where(moving, self.params.v_max, 0.0), self.params, self.scenario.dt),
+                ],
+                axis=1,
+            )
         return velocity_command(view, full_speed_along(direction, self.params), self.params, self.scenario.dt)
 
 
@@ -200,9 +204,14 @@ class WallRunner(_Evader):
         """The perimeter point ``(n, 2)`` at anticlockwise arc length ``arc`` from (hx, -hy)."""
         s = arc % (4.0 * (hx + hy))
         right, top, left = 2 * hy, 2 * hy + 2 * hx, 4 * hy + 2 * hx
-        x = np.select([s < right, s < top, s < left], [np.full_like(s, hx), hx - (s - right), np.full_like(s, -hx)],
-                      -hx + (s - left))
-        y = np.select([s < right, s < top, s < left], [-hy + s, np.full_like(s, hy), hy - (s - top)], np.full_like(s, -hy))
+        x = np.select(
+            [s < right, s < top, s < left],
+            [np.full_like(s, hx), hx - (s - right), np.full_like(s, -hx)],
+            -hx + (s - left),
+        )
+        y = np.select(
+            [s < right, s < top, s < left], [-hy + s, np.full_like(s, hy), hy - (s - top)], np.full_like(s, -hy)
+        )
         return np.stack([x, y], axis=1)
 
 

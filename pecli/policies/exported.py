@@ -77,14 +77,17 @@ class ExportedPolicy(WindowedPolicy):
         super().reset(n, mask, seed)
 
     def _inputs(self, stack: np.ndarray, history: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """Normalised stacks ``(d, k * dim)`` and windows ``(d, T * dim)`` as SI rows ``(d, k, dim)``, ``(d, T, dim)``."""
+        """Normalised stacks ``(d, k * dim)`` and windows ``(d, T * dim)`` as SI rows
+        ``(d, k, dim)``, ``(d, T, dim)``."""
         dim = self.layout.dim
         rows = self.layout.to_si(stack.reshape(-1, dim)).reshape(stack.shape[0], -1, dim)
         if history is None:
             return rows, None
         return rows, self.layout.to_si(history.reshape(-1, dim)).reshape(history.shape[0], -1, dim)
 
-    def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:
+    def _decide(
+        self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray
+    ) -> np.ndarray:
         obs, window = self._inputs(stack, history)
         uniform, normal = draws if draws is not None else (None, None)
         outputs = self.model.run(obs, window, uniform, normal)

@@ -60,7 +60,9 @@ RULES = 3  # the players' rule, in their identity: results cached under an older
 
 def _pair_norm(gap: np.ndarray) -> np.ndarray:
     """``(n, px, ex, py, ey)`` distances from per-axis gaps ``(3 pursuer inputs, 3 evader inputs, 2 axes, n)``."""
-    return np.hypot(gap[:, :, 0].transpose(2, 0, 1)[:, :, :, None, None], gap[:, :, 1].transpose(2, 0, 1)[:, None, None])
+    return np.hypot(
+        gap[:, :, 0].transpose(2, 0, 1)[:, :, :, None, None], gap[:, :, 1].transpose(2, 0, 1)[:, None, None]
+    )
 
 
 def choose(scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
@@ -70,8 +72,9 @@ def choose(scores: np.ndarray, distances: np.ndarray) -> np.ndarray:
     return np.argmin(np.where(tied, distances, np.inf), axis=1)
 
 
-def pursuer_choice(scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray,
-                   force: float = FORCE_STEPS) -> np.ndarray:
+def pursuer_choice(
+    scores: np.ndarray, distances: np.ndarray, mutual: np.ndarray, force: float = FORCE_STEPS
+) -> np.ndarray:
     """The pursuer's input ``(n,)`` from the scores and distances ``(n, 9 own, 9 evader inputs)``: the best
     average over the evader's inputs, or, in a game of ``mutual`` sight where some input's score is at most
     ``force`` (a capture within that many steps) against every evader input, the best worst case."""
@@ -196,8 +199,12 @@ class HJPolicy(HeuristicPolicy):
                 dynamics.stop_at_walls(step, *self.half)
             moved[role] = np.stack(steps)  # (3, 4, n)
         p, e = moved["pursuer"][:, None], moved["evader"][None, :]  # (3 pursuer, 3 evader, 4, n)
-        points = self.grid.points(*(np.broadcast_to(rows, (3, 3, 2, n)).transpose(0, 1, 3, 2).reshape(-1, 2)
-                                    for rows in (p[:, :, 0:2], p[:, :, 2:4], e[:, :, 0:2], e[:, :, 2:4])))
+        points = self.grid.points(
+            *(
+                np.broadcast_to(rows, (3, 3, 2, n)).transpose(0, 1, 3, 2).reshape(-1, 2)
+                for rows in (p[:, :, 0:2], p[:, :, 2:4], e[:, :, 0:2], e[:, :, 2:4])
+            )
+        )
         points = points.reshape(3, 3, n, -1).transpose(2, 0, 1, 3).reshape(n, 9, -1)  # (n, 3 i + j, d)
         scores = self.grid.interpolate_pairs(self.scores, points[:, :, :half], points[:, :, half:])
         gap = e[:, :, 0:2] - p[:, :, 0:2]  # (3, 3, 2, n): per axis, depends on that axis's inputs only

@@ -62,8 +62,9 @@ class LearnedPolicy(WindowedPolicy):
         if meta.role != role:
             raise PolicyError(f"{path} is a {meta.role} checkpoint; it cannot play {role}")
         if meta.scenario_hash != scenario.fingerprint():
-            raise PolicyError(f"{path} was trained on {_scenario_mismatch(path, meta, scenario)}: "
-                              "pass the config it was trained with")
+            raise PolicyError(
+                f"{path} was trained on {_scenario_mismatch(path, meta, scenario)}: pass the config it was trained with"
+            )
         from pecli.models.checkpoint import (
             load_policy,  # SB3 and the networks load only when a checkpoint is asked for
         )
@@ -85,7 +86,9 @@ class LearnedPolicy(WindowedPolicy):
             mixture = self._belief.mixture(th.as_tensor(memory[1]))
         return mixture.weights.numpy(), mixture.means.numpy(), mixture.stds.numpy()
 
-    def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:
+    def _decide(
+        self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray
+    ) -> np.ndarray:
         """SB3's deterministic ``Actor.forward`` without its preprocessing, which insists on the training-time
         keys (a belief's actor trained on stored ``belief`` features but plays from the ``history`` window):
         ``deterministic_actor(actor)(actor.features_extractor(batch))``, on the actor's device."""
@@ -96,7 +99,9 @@ class LearnedPolicy(WindowedPolicy):
             batch["uniform"], batch["normal"] = draws
         device = self.actor.device
         with th.no_grad():
-            features = self.actor.features_extractor({key: th.as_tensor(value, device=device) for key, value in batch.items()})
+            features = self.actor.features_extractor(
+                {key: th.as_tensor(value, device=device) for key, value in batch.items()}
+            )
             return self._act(features).cpu().numpy()
 
     def __repr__(self) -> str:
@@ -118,5 +123,7 @@ def _scenario_mismatch(path: Path, meta: CheckpointMeta, scenario: Scenario) -> 
             changes = [f"{key} {theirs!r} there, {ours!r} here" for key, ours, theirs in scenario.differences(trained)]
             more = f" and {len(changes) - 3} more" if len(changes) > 3 else ""
             return f"'{meta.scenario}', which differs from '{scenario.name}' in " + "; ".join(changes[:3]) + more
-    return (f"scenario '{meta.scenario}' (fingerprint {meta.scenario_hash}), another game than '{scenario.name}' "
-            f"({scenario.fingerprint()})")
+    return (
+        f"scenario '{meta.scenario}' (fingerprint {meta.scenario_hash}), another game than '{scenario.name}' "
+        f"({scenario.fingerprint()})"
+    )

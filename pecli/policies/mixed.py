@@ -38,7 +38,11 @@ class MixedPolicy:
     """
 
     def __init__(
-        self, role: Role, members: Sequence[Policy], names: Sequence[str], weights: Sequence[float] | None = None,
+        self,
+        role: Role,
+        members: Sequence[Policy],
+        names: Sequence[str],
+        weights: Sequence[float] | None = None,
         stack: bool = True,
     ) -> None:
         if not members:
@@ -72,7 +76,9 @@ class MixedPolicy:
     def weights(self, value: Sequence[float]) -> None:
         w = np.asarray(value, dtype=np.float64)
         if w.shape != (len(self.members),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-            raise ValueError(f"weights must be {len(self.members)} non-negative numbers with a positive sum, got {value}")
+            raise ValueError(
+                f"weights must be {len(self.members)} non-negative numbers with a positive sum, got {value}"
+            )
         self._weights = w / w.sum()
 
     @property
@@ -116,8 +122,11 @@ class MixedPolicy:
                 actions[rows] = np.asarray(self.members[k].act(obs))[rows]
         for stack, decisions in waiting.items():
             if stack.worth_it(len(decisions), sum(len(d.stack) for _, d in decisions)):
-                decided = stack.decide([self._stacked[k][1] for k, _ in decisions], [d.stack for _, d in decisions],
-                                       [d.history for _, d in decisions])
+                decided = stack.decide(
+                    [self._stacked[k][1] for k, _ in decisions],
+                    [d.stack for _, d in decisions],
+                    [d.history for _, d in decisions],
+                )
             else:  # too few to gain from deciding together
                 decided = [self.members[k].decide(d) for k, d in decisions]
             for (k, decision), chosen in zip(decisions, decided):

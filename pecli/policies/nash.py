@@ -85,8 +85,10 @@ def load_nash_policy(options: str, role: Role, scenario: Scenario, member: Calla
     path = nash_path(options)
     record = read_nash(path)
     if record.scenario_hash != scenario.fingerprint():
-        raise PolicyError(f"{path}: its players play scenario '{record.scenario}', not '{scenario.name}': "
-                          "pass the config they were trained with")
+        raise PolicyError(
+            f"{path}: its players play scenario '{record.scenario}', not '{scenario.name}': "
+            "pass the config they were trained with"
+        )
     members = [m for m in (record.pursuer if role == "pursuer" else record.evader) if m.weight > 0]
     if not members:
         raise PolicyError(f"{path}: its {role} mixture has no member of positive weight")

@@ -102,8 +102,10 @@ def _nash_member(spec: str, folder: Path) -> str:
             raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
         return str(member)
     if not trusted():
-        raise PolicyError(f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
-                          "no code a file names unless you pass `pecli --trust`")
+        raise PolicyError(
+            f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
+            "no code a file names unless you pass `pecli --trust`"
+        )
     return spec
 
 
@@ -131,8 +133,11 @@ def family_of(spec: str) -> str | None:
 
 def builtin_names(role: Role | None = None, paper_only: bool = False) -> list[str]:
     """Names of the built-in policies, those that can play ``role`` if given, the paper's only if asked."""
-    return [name for name, cls in BUILTINS.items()
-            if (role is None or role in cls.roles) and (not paper_only or name in PAPER_BASELINES)]
+    return [
+        name
+        for name, cls in BUILTINS.items()
+        if (role is None or role in cls.roles) and (not paper_only or name in PAPER_BASELINES)
+    ]
 
 
 def resolve_policy(spec: str, role: Role, scenario: Scenario, seed: int | None = None) -> Policy:
@@ -180,12 +185,16 @@ def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
         real, room = Path(os.path.realpath(path)), Path(os.path.realpath(inside))
         if real == room or room in real.parents:
             return spec
-        raise PolicyError(f"{source} names the policy file {spec}, outside {inside}: pecli follows no path a record "
-                          "names out of its folder; name the opponent yourself (--opponent) to use it")
+        raise PolicyError(
+            f"{source} names the policy file {spec}, outside {inside}: pecli follows no path a record "
+            "names out of its folder; name the opponent yourself (--opponent) to use it"
+        )
     if ":" in spec and trusted():
         return spec
-    raise PolicyError(f"{source} names the policy '{spec}', neither a built-in nor a policy file: pecli imports "
-                      "no code a file names unless you pass `pecli --trust`")
+    raise PolicyError(
+        f"{source} names the policy '{spec}', neither a built-in nor a policy file: pecli imports "
+        "no code a file names unless you pass `pecli --trust`"
+    )
 
 
 def stored_scenario(spec: str) -> Scenario | None:

@@ -60,8 +60,9 @@ def _stack_layers(networks: Sequence[list[nn.Module]]) -> Stack:
     stack: Stack = []
     for layer in zip(*networks):
         if isinstance(layer[0], nn.Linear):
-            stack.append(("linear", th.stack([m.weight.detach() for m in layer]),
-                          th.stack([m.bias.detach() for m in layer])))
+            stack.append(
+                ("linear", th.stack([m.weight.detach() for m in layer]), th.stack([m.bias.detach() for m in layer]))
+            )
         else:
             stack.append((ACTIVATIONS[type(layer[0])], None, None))
     return stack
@@ -94,16 +95,22 @@ class _StackedBiMDN:
         self.bias = weights("bias_ih_l0") + weights("bias_hh_l0")
         self.hidden, self.count = nets[0].lstm.hidden_size, len(nets)
         self.trunk = _stack_layers([list(net.trunk) for net in nets])
-        self.heads = {name: _stack_layers([list(getattr(net.head, name)) for net in nets])
-                      for name in ("weight_head", "mean_head")}
+        self.heads = {
+            name: _stack_layers([list(getattr(net.head, name)) for net in nets])
+            for name in ("weight_head", "mean_head")
+        }
         self.components = nets[0].components
 
     def means(self, windows: th.Tensor, members: th.Tensor) -> th.Tensor:
         m, batch, steps, _ = windows.shape
         both = th.cat([members, members + self.count])  # the rows of (2M, ...) holding these members' directions
         inputs = th.cat([windows, windows.flip(2)])  # the reverse direction reads the window backwards
-        gates_in = th.baddbmm(self.bias[both].unsqueeze(1), inputs.reshape(2 * m, batch * steps, -1),
-                              self.w_ih[both]).view(2 * m, batch, steps, -1).transpose(0, 2).contiguous()
+        gates_in = (
+            th.baddbmm(self.bias[both].unsqueeze(1), inputs.reshape(2 * m, batch * steps, -1), self.w_ih[both])
+            .view(2 * m, batch, steps, -1)
+            .transpose(0, 2)
+            .contiguous()
+        )
         w_hh = self.w_hh[both]
         h = windows.new_zeros(2 * m, batch, self.hidden)
         c = th.zeros_like(h)
@@ -147,8 +154,10 @@ class StackedActors:
         if not isinstance(member, LearnedPolicy) or member.actor.device.type != "cpu":
             return None
         extractor = member.actor.features_extractor
-        if not (isinstance(extractor, BeliefExtractor)
-                or (isinstance(extractor, KeysExtractor) and extractor.keys == ("obs",))):
+        if not (
+            isinstance(extractor, BeliefExtractor)
+            or (isinstance(extractor, KeysExtractor) and extractor.keys == ("obs",))
+        ):
             return None
         layers = _layers(deterministic_actor(member.actor))
         if layers is None:
@@ -156,14 +165,30 @@ class StackedActors:
         belief = member._belief
         if belief is None:
             return ("none", _signature(layers))
-        if (belief.kind != "bimdn" or not isinstance(belief.net, BiMDN) or belief.net.lstm.num_layers != 1
-                or not belief.net.lstm.bidirectional or not belief.net.lstm.batch_first):
+        if (
+            belief.kind != "bimdn"
+            or not isinstance(belief.net, BiMDN)
+            or belief.net.lstm.num_layers != 1
+            or not belief.net.lstm.bidirectional
+            or not belief.net.lstm.batch_first
+        ):
             return None
         net = belief.net
         frame = belief.frame
         heads = tuple(_signature(list(getattr(net.head, name))) for name in ("weight_head", "mean_head"))
-        return ("bimdn", _signature(layers), belief.window, net.lstm.hidden_size, net.components,
-                _signature(list(net.trunk)), heads, frame.frame, frame.half, frame.inverse_range, frame.heading_index)
+        return (
+            "bimdn",
+            _signature(layers),
+            belief.window,
+            net.lstm.hidden_size,
+            net.components,
+            _signature(list(net.trunk)),
+            heads,
+            frame.frame,
+            frame.half,
+            frame.inverse_range,
+            frame.heading_index,
+        )
 
     @classmethod
     def of(cls, members: Sequence[object]) -> dict[int, tuple[StackedActors, int]]:
@@ -181,8 +206,9 @@ class StackedActors:
         return placed
 
     @th.no_grad()
-    def decide(self, rows: Sequence[int], stacks: Sequence[np.ndarray],
-               histories: Sequence[np.ndarray | None]) -> list[np.ndarray]:
+    def decide(
+        self, rows: Sequence[int], stacks: Sequence[np.ndarray], histories: Sequence[np.ndarray | None]
+    ) -> list[np.ndarray]:
         """Actions ``(d_j, 2)`` of the members at stacked ``rows`` for their deciding games: frame stacks
         ``(d_j, k * dim)`` and (with a belief) windows ``(d_j, samples * dim)``."""
         sizes = [len(stack) for stack in stacks]

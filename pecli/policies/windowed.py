@@ -151,6 +151,8 @@ class WindowedPolicy(ABC):
         return self._stack.get()[:games], None if self._history is None else self._history.get()[:games]
 
     @abstractmethod
-    def _decide(self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray) -> np.ndarray:
+    def _decide(
+        self, stack: np.ndarray, history: np.ndarray | None, draws: Draws | None, due: np.ndarray
+    ) -> np.ndarray:
         """Actions ``(d, 2)`` in [-1, 1] for the ``d`` games deciding now (``due``, ``(n,)`` bool):
         their frame stacks ``(d, k * dim)``, history windows ``(d, samples * dim)`` and draws."""

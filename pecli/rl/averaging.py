@@ -23,8 +23,18 @@ from pecli.io import atomic_path, atomic_write_json
 from pecli.models.checkpoint import read_weights
 from pecli.zoo import CheckpointMeta, ZooError, metadata_path, read_metadata
 
-SAME_NETWORK = ("role", "algo", "belief", "scenario_hash", "frame_skip", "frame_stack", "history_length",
-                "history_stride", "policy_kwargs", "belief_kwargs")  # metadata that must agree to average
+SAME_NETWORK = (
+    "role",
+    "algo",
+    "belief",
+    "scenario_hash",
+    "frame_skip",
+    "frame_stack",
+    "history_length",
+    "history_stride",
+    "policy_kwargs",
+    "belief_kwargs",
+)  # metadata that must agree to average
 
 
 def _network(meta: CheckpointMeta, name: str) -> object:
@@ -40,8 +50,14 @@ def mean_state(states: list[dict[str, th.Tensor]]) -> dict[str, th.Tensor]:
     keys = list(states[-1])
     if any(list(state) != keys for state in states):
         raise ZooError("their networks have different parameters")
-    return {key: (th.stack([state[key].double() for state in states]).mean(0).to(states[-1][key].dtype)
-                  if states[-1][key].is_floating_point() else states[-1][key]) for key in keys}
+    return {
+        key: (
+            th.stack([state[key].double() for state in states]).mean(0).to(states[-1][key].dtype)
+            if states[-1][key].is_floating_point()
+            else states[-1][key]
+        )
+        for key in keys
+    }
 
 
 def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
@@ -54,20 +70,24 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
     for path, meta in zip(paths, metas):
         for name in SAME_NETWORK:
             if _network(meta, name) != _network(newest, name):
-                raise ZooError(f"{path}: its {name} differs from {paths[-1]}'s: only checkpoints of one network "
-                               "average")
+                raise ZooError(
+                    f"{path}: its {name} differs from {paths[-1]}'s: only checkpoints of one network average"
+                )
     try:
         policy = mean_state([read_weights(path)[0]["policy"] for path in paths])
     except ZooError as exc:
         raise ZooError(f"{', '.join(map(str, paths))}: {exc}") from None
     buffer = io.BytesIO()
     th.save(policy, buffer)
-    with atomic_path(out) as tmp, zipfile.ZipFile(paths[-1]) as source, \
-            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target:
+    with (
+        atomic_path(out) as tmp,
+        zipfile.ZipFile(paths[-1]) as source,
+        zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target,
+    ):
         for item in source.infolist():
             target.writestr(item, buffer.getvalue() if item.filename == "policy.pth" else source.read(item.filename))
-    meta = replace(newest, averaged=[str(path) for path in paths],
-                   created=datetime.now(UTC).isoformat(timespec="seconds"))
+    meta = replace(
+        newest, averaged=[str(path) for path in paths], created=datetime.now(UTC).isoformat(timespec="seconds")
+    )
     atomic_write_json(metadata_path(out), meta.to_dict())
     return meta
-

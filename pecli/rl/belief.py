@@ -1,13 +1,13 @@
 """Training with a belief: features computed when transitions are collected, and the belief's own fitting.
 
-A BiLSTM inside every TD3 gradient step would make training 40-50x slower (211 ms against 5 ms a step at batch 256 on one core). So,
-as the paper puts it, each observation is *extended* with the belief: :class:`BeliefVecEnv` runs
-the belief once per vector step, batched over all games, replaces the ``history`` window by the
-belief features in what the replay buffer stores, and keeps the (window, true opponent position)
-pairs in a :class:`BeliefBuffer` of its own. :class:`FitBelief` fits the belief network on those by
-negative log-likelihood with its own optimiser (paper: buffer 25 000, warm-up 10 000, an update every
-10 steps, batch 256, Adam 0.002). The features stored with older transitions were computed by an
-older belief; the actor reads them as they were when the transition happened.
+A BiLSTM inside every TD3 gradient step would make training 40-50x slower (211 ms against 5 ms a step at batch
+256 on one core). So, as the paper puts it, each observation is *extended* with the belief:
+:class:`BeliefVecEnv` runs the belief once per vector step, batched over all games, replaces the ``history``
+window by the belief features in what the replay buffer stores, and keeps the (window, true opponent position)
+pairs in a :class:`BeliefBuffer` of its own. :class:`FitBelief` fits the belief network on those by negative
+log-likelihood with its own optimiser (paper: buffer 25 000, warm-up 10 000, an update every 10 steps, batch
+256, Adam 0.002). The features stored with older transitions were computed by an older belief; the actor reads
+them as they were when the transition happened.
 """
 
 from __future__ import annotations
@@ -83,8 +83,11 @@ class BeliefVecEnv(VecEnvWrapper):
         self._features_dim = features_dim
         super().__init__(venv, observation_space=belief_observation_space(venv.observation_space, features_dim))
         # where the truth is: the opponent's (x, y) in the normalised state, and the newest seen flag
-        self._target = slice(0, 2) if role == "evader" else slice(core.game.dynamics["pursuer"].state_dim,
-                                                                      core.game.dynamics["pursuer"].state_dim + 2)
+        self._target = (
+            slice(0, 2)
+            if role == "evader"
+            else slice(core.game.dynamics["pursuer"].state_dim, core.game.dynamics["pursuer"].state_dim + 2)
+        )
         dim = core.game.obs_dim[role]
         self._seen_index = (core.training.frame_stack - 1) * dim + core.game.codecs[role].seen_index
 
@@ -109,7 +112,10 @@ class BeliefVecEnv(VecEnvWrapper):
         obs, rewards, dones, infos = self.venv.step_wait()
         ended = [info for info in infos if "terminal_observation" in info]
         if ended:  # one batched belief pass for every game that ended this step
-            batch = {key: np.stack([info["terminal_observation"][key] for info in ended]) for key in ended[0]["terminal_observation"]}
+            batch = {
+                key: np.stack([info["terminal_observation"][key] for info in ended])
+                for key in ended[0]["terminal_observation"]
+            }
             converted = self._convert(batch, record=False)
             for j, info in enumerate(ended):
                 info["terminal_observation"] = {key: value[j] for key, value in converted.items()}
@@ -124,7 +130,9 @@ class FitBelief(BaseCallback):
     in which the opponent was not seen.
     """
 
-    def __init__(self, belief: BeliefModel, buffer: BeliefBuffer, settings: BeliefSettings, half: tuple[float, float]) -> None:
+    def __init__(
+        self, belief: BeliefModel, buffer: BeliefBuffer, settings: BeliefSettings, half: tuple[float, float]
+    ) -> None:
         super().__init__()
         self.belief, self.buffer, self.settings = belief, buffer, settings
         self.optimizer = th.optim.Adam(belief.parameters(), lr=settings.learning_rate)
@@ -151,6 +159,10 @@ class FitBelief(BaseCallback):
         self.logger.record("belief/nll", loss.item())
         if unseen.any():
             with th.no_grad():
-                error = ((mixture.mean() - target) * self.half.to(device)).norm(dim=1)[th.as_tensor(unseen, device=device)].mean()
+                error = (
+                    ((mixture.mean() - target) * self.half.to(device))
+                    .norm(dim=1)[th.as_tensor(unseen, device=device)]
+                    .mean()
+                )
             self.logger.record("belief/unseen_error_m", float(error))
         return loss.item()

@@ -32,10 +32,12 @@ def scheduled_turns(settings: SelfPlaySettings, turns: Turns, round: int) -> lis
     in every ``league_exploiter_every``-th round of a league (never if 0), once the rounds before it spent
     ``league_exploiter_after`` CPU-hours (a fact of the record: a resumed run decides alike)."""
     every = settings.league_exploiter_every if settings.opponents in LEAGUES else 0
-    exploiters = bool(every) and round % every == 0 and \
-        cpu_through(turns, round - 1) >= 3600.0 * settings.league_exploiter_after
-    return [(MAIN, role) for role in ROLES] + \
-        [(EXPLOITER, role) for role in ROLES if exploiters and role in settings.league_exploiter_roles]
+    exploiters = (
+        bool(every) and round % every == 0 and cpu_through(turns, round - 1) >= 3600.0 * settings.league_exploiter_after
+    )
+    return [(MAIN, role) for role in ROLES] + [
+        (EXPLOITER, role) for role in ROLES if exploiters and role in settings.league_exploiter_roles
+    ]
 
 
 def whole_rounds(turns: Turns, settings: SelfPlaySettings) -> int:

@@ -67,7 +67,8 @@ class FiniteCheck(BaseCallback):
     def _stop(self, what: str) -> None:
         raise TrainingDiverged(
             f"training diverged at step {self.num_timesteps:,}: {what}; stopped without saving this model "
-            "(lower the learning rate, or check the rewards and reward_scale)")
+            "(lower the learning rate, or check the rewards and reward_scale)"
+        )
 
 
 def every_episodes(every: int, done: int, action: Callable[[int], None]) -> Callable[[int], None]:
@@ -164,8 +165,9 @@ class ProgressDisplay(BaseCallback):
             TimeRemainingColumn(),
             disable=not enabled,
         )
-        self.task = self.progress.add_task(escape(description), total=total_steps, episodes=0, capture="  -  ",
-                                           rate="-")
+        self.task = self.progress.add_task(
+            escape(description), total=total_steps, episodes=0, capture="  -  ", rate="-"
+        )
         self._last = 0.0
         self._start_time = 0.0
         self._start_steps = 0

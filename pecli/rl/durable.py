@@ -112,8 +112,12 @@ class Record:
             _count(getattr(record, name), name)
         if not isinstance(record.cpu_seconds, int | float) or not math.isfinite(record.cpu_seconds):
             raise ValueError(f"cpu_seconds must be a number, not {record.cpu_seconds!r}")
-        if not isinstance(record.model, str) or not isinstance(record.belief_optimizer, str | None) \
-                or not isinstance(record.belief_rng, dict | None) or not isinstance(record.extra, dict):
+        if (
+            not isinstance(record.model, str)
+            or not isinstance(record.belief_optimizer, str | None)
+            or not isinstance(record.belief_rng, dict | None)
+            or not isinstance(record.extra, dict)
+        ):
             raise ValueError("model and belief_optimizer name files; belief_rng and extra are JSON objects")
         return record
 
@@ -124,6 +128,7 @@ def _own_file_name(name: object) -> bool:
 
 
 # -- ring buffers as arrays ---------------------------------------------------------------------------
+
 
 def replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
     """The arrays of an SB3 replay buffer, each ``(rows, n_envs, ...)``, by name."""
@@ -163,7 +168,9 @@ def _read_chunks(directory: Path, ring: Ring, arrays: dict[str, np.ndarray]) -> 
                 raise ValueError(f"{chunk.file} holds {sorted(data.files)}, the buffer {sorted(arrays)}")
             for key, target in arrays.items():
                 if data[key].shape != (rows.size, *target.shape[1:]):
-                    raise ValueError(f"{chunk.file}: {key} has shape {data[key].shape}, the buffer rows {target.shape[1:]}")
+                    raise ValueError(
+                        f"{chunk.file}: {key} has shape {data[key].shape}, the buffer rows {target.shape[1:]}"
+                    )
                 target[rows] = data[key]
 
 
@@ -181,6 +188,7 @@ def _replay_added(buffer: Any, ring: Ring, steps_before: int, steps_now: int) ->
 
 
 # -- the state of one learner -----------------------------------------------------------------------
+
 
 class DurableState:
     """The resumable state of one learner in ``directory`` (``<run>/<role>/resume``).
@@ -210,8 +218,11 @@ class DurableState:
         strays = sorted(name for name in record.files() if not _own_file_name(name))
         if strays:  # a record from elsewhere must not lead pecli out of this folder
             raise ZooError(f"{path}: damaged resume state (names {strays[0]!r}, not a file of {self.directory})")
-        missing = sorted(name for name in record.files()
-                         if (self.directory / name).is_symlink() or not (self.directory / name).is_file())
+        missing = sorted(
+            name
+            for name in record.files()
+            if (self.directory / name).is_symlink() or not (self.directory / name).is_file()
+        )
         if missing:
             raise ZooError(f"{path} names files that are gone ({', '.join(missing)})")
         return record
@@ -254,7 +265,9 @@ class DurableState:
         self.record = record
 
     # writing ---------------------------------------------------------------------------------------
-    def save(self, model: Any, fit: Any, episodes: int, cpu_seconds: float, extra: dict[str, Any] | None = None) -> Path:
+    def save(
+        self, model: Any, fit: Any, episodes: int, cpu_seconds: float, extra: dict[str, Any] | None = None
+    ) -> Path:
         """Commit the learner's state now; returns the model file (a checkpoint to link elsewhere)."""
         self.directory.mkdir(parents=True, exist_ok=True)
         previous = self.record
@@ -262,8 +275,14 @@ class DurableState:
         model_name = f"model-{steps:09d}.zip"
         with atomic_path(self.directory / model_name) as tmp:
             model.save(tmp)
-        record = Record(steps=steps, episodes=episodes, n_updates=int(model._n_updates),
-                        cpu_seconds=round(cpu_seconds, 2), model=model_name, extra=dict(extra or {}))
+        record = Record(
+            steps=steps,
+            episodes=episodes,
+            n_updates=int(model._n_updates),
+            cpu_seconds=round(cpu_seconds, 2),
+            model=model_name,
+            extra=dict(extra or {}),
+        )
         buffer = getattr(model, "replay_buffer", None)
         if buffer is not None:
             ring = previous.replay if previous and previous.replay else Ring(buffer.buffer_size)

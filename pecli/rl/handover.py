@@ -33,8 +33,10 @@ def averaged_rounds(turns: Turns, curriculum_steps: int, scenario: Scenario) -> 
     eased = curriculum.span(curriculum_steps) if curriculum.enabled else 0  # transitions per learner
     rounds: dict[Role, list[str]] = {}
     for role in ROLES if last else ():
-        mine = sorted((t for t in turns if t.get("role") == role and t.get("learner", MAIN) == MAIN),
-                      key=lambda t: int(t["round"]))
+        mine = sorted(
+            (t for t in turns if t.get("role") == role and t.get("learner", MAIN) == MAIN),
+            key=lambda t: int(t["round"]),
+        )
         started = [0, *(int(t["steps"]) for t in mine)]  # the learner's transitions when each turn began
         real = [t for t, steps in zip(mine, started) if steps >= eased] or mine[-1:]
         if real:
@@ -58,6 +60,9 @@ def stale_averages(folder: Path, turns: Turns, curriculum_steps: int, scenario: 
     checkpoints it should be the mean of: a stop between a round's record and its averages leaves one behind."""
     wanted = averaged_rounds(turns, curriculum_steps, scenario)
     paths = {role: [folder / checkpoint for checkpoint in checkpoints] for role, checkpoints in wanted.items()}
-    return {role: inputs for role, inputs in paths.items()
-            if [Path(path).resolve() for path in averaged_from(folder / role / AVERAGE_FILE) or []]
-            != [path.resolve() for path in inputs]}  # resolved: a driver's relative --out, a Ray task's absolute one
+    return {
+        role: inputs
+        for role, inputs in paths.items()
+        if [Path(path).resolve() for path in averaged_from(folder / role / AVERAGE_FILE) or []]
+        != [path.resolve() for path in inputs]
+    }  # resolved: a driver's relative --out, a Ray task's absolute one

@@ -68,17 +68,33 @@ def opponent_wins(role: Role, stats: EpisodeStats) -> int:
 
 
 class Learner:
-    """One side of self-play: its SB3 model, its batched view, its durable state and the callbacks that outlive a turn."""
+    """One side of self-play: its SB3 model, its batched view, its durable state and the callbacks that
+    outlive a turn."""
 
-    def __init__(self, job: SelfPlayJob, role: Role, placeholder: Policy | None, run: Run, state: SelfPlayState,
-                 view: Any = None, kind: str = MAIN) -> None:
+    def __init__(
+        self,
+        job: SelfPlayJob,
+        role: Role,
+        placeholder: Policy | None,
+        run: Run,
+        state: SelfPlayState,
+        view: Any = None,
+        kind: str = MAIN,
+    ) -> None:
         """Build the ``kind`` learner of ``role`` (main, or a league's exploiter) afresh, or from its durable
         state when it has one. It plays against ``placeholder`` (replaced by each turn's pool) or, in the
         simultaneous schedule, in ``view``."""
         self.role, self.kind = role, kind
         self.folder = role if kind == MAIN else f"{EXPLOITER}-{role}"  # where its checkpoints and state go
-        self.train_job = TrainJob(role=role, scenario=job.scenario, opponent="selfplay", zoo=job.zoo, name=job.name,
-                                  seed=job.seed, device=job.device)
+        self.train_job = TrainJob(
+            role=role,
+            scenario=job.scenario,
+            opponent="selfplay",
+            zoo=job.zoo,
+            name=job.name,
+            seed=job.seed,
+            device=job.device,
+        )
         self.env, self.model, self.fit = make_learner(self.train_job, placeholder, job.seed, run.path / "tb", view=view)
         t = job.scenario.training
         self.callbacks: list[Any] = []
@@ -96,8 +112,10 @@ class Learner:
         if record is not None:
             self.durable.restore(record, self.model, self.fit)
         elif latest is not None and not latest.joined:
-            raise PecliError(f"run '{run.name}' was written by an older pecli (its {role} has no {RESUME_DIR}/ state), "
-                             "which this one cannot resume; its checkpoints still play (with --trust)")
+            raise PecliError(
+                f"run '{run.name}' was written by an older pecli (its {role} has no {RESUME_DIR}/ state), "
+                "which this one cannot resume; its checkpoints still play (with --trust)"
+            )
         else:
             self.durable.clear()  # a fresh learner: what a stop before its first commit left goes
 

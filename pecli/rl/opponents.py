@@ -60,8 +60,9 @@ class PoolPlayers:
         """The whole pool as one player whose games each draw a member (the weights come per turn)."""
         if not pool.entries:
             raise PecliError(f"the {pool.role} pool of run '{self.run.name}' is empty (damaged {STATE_FILE}?)")
-        return MixedPolicy(pool.role, [self.player(pool.role, e.spec) for e in pool.entries],
-                           [e.name for e in pool.entries])
+        return MixedPolicy(
+            pool.role, [self.player(pool.role, e.spec) for e in pool.entries], [e.name for e in pool.entries]
+        )
 
 
 class OpponentRule:
@@ -81,8 +82,16 @@ class OpponentRule:
     def weigher(self, learner: Role, state: SelfPlayState) -> Callable[[OpponentPool], np.ndarray]:
         """The weights of the opponents' pool for ``learner``'s turn."""
         sp, priors, mixture = self.settings, self.priors(learner, state), self.mixture(opponent_of(learner), state)
-        return lambda pool: pool.weights(sp.opponents, sp.pfsp_power, priors, sp.pfsp_prior_episodes, sp.league_floor,
-                                         sp.league_floor_split, sp.league_exploiter_share, mixture)
+        return lambda pool: pool.weights(
+            sp.opponents,
+            sp.pfsp_power,
+            priors,
+            sp.pfsp_prior_episodes,
+            sp.league_floor,
+            sp.league_floor_split,
+            sp.league_exploiter_share,
+            mixture,
+        )
 
 
 class Prioritised(OpponentRule):
@@ -130,11 +139,20 @@ class NashMixture(OpponentRule):
             return loaded[role, spec]
 
         for p, e in missing:
-            match, _ = play_match(self.players.scenario, player("pursuer", p.spec), player("evader", e.spec),
-                                  self.settings.nash_games, seed=state.seed)
+            match, _ = play_match(
+                self.players.scenario,
+                player("pursuer", p.spec),
+                player("evader", e.spec),
+                self.settings.nash_games,
+                seed=state.seed,
+            )
             state.payoffs[f"{p.name}|{e.name}"] = [int(match.captured.sum()), match.episodes]
-        rates = np.array([[state.payoffs[f"{p.name}|{e.name}"][0] / state.payoffs[f"{p.name}|{e.name}"][1]
-                           for e in evaders] for p in pursuers])
+        rates = np.array(
+            [
+                [state.payoffs[f"{p.name}|{e.name}"][0] / state.payoffs[f"{p.name}|{e.name}"][1] for e in evaders]
+                for p in pursuers
+            ]
+        )
         return solve([p.name for p in pursuers], [e.name for e in evaders], rates).support(side)
 
 

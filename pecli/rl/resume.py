@@ -28,8 +28,10 @@ def check_cpu_hours(hours: float | None) -> float | None:
 def resumed_scenario(run_scenario: Scenario, config: str | None, name: str) -> Scenario:
     """A resumed run's own scenario; :class:`PecliError` if ``config`` names another game."""
     if config is not None and load_scenario(config).fingerprint() != run_scenario.fingerprint():
-        raise PecliError(f"run '{name}' plays scenario '{run_scenario.name}' ({run_scenario.fingerprint()}), another "
-                         "game than --config's; a resumed run keeps its own (drop --config)")
+        raise PecliError(
+            f"run '{name}' plays scenario '{run_scenario.name}' ({run_scenario.fingerprint()}), another "
+            "game than --config's; a resumed run keeps its own (drop --config)"
+        )
     return run_scenario
 
 
@@ -58,8 +60,15 @@ class ResumedTrain:
     curriculum_steps: int
 
 
-def resume_train(zoo: Path, name: str | None, role: str, config: str | None, opponent: str | None,
-                 seed: int | None, settings: dict[str, Any]) -> ResumedTrain:
+def resume_train(
+    zoo: Path,
+    name: str | None,
+    role: str,
+    config: str | None,
+    opponent: str | None,
+    seed: int | None,
+    settings: dict[str, Any],
+) -> ResumedTrain:
     """The run ``name`` of ``zoo`` as it continues; :class:`PecliError` if it is not a ``train`` run of ``role``,
     or an option changes what a resumed run keeps. The opponent its record names is resolved as data."""
     from pecli.policies.registry import recorded_policy
@@ -83,8 +92,9 @@ def resume_train(zoo: Path, name: str | None, role: str, config: str | None, opp
     return ResumedTrain(scenario, opponent, kept["seed"], scenario.training.steps)
 
 
-def resume_selfplay(zoo: Path, name: str | None, config: str | None, seed: int | None,
-                    settings: dict[str, Any]) -> tuple[Scenario, int]:
+def resume_selfplay(
+    zoo: Path, name: str | None, config: str | None, seed: int | None, settings: dict[str, Any]
+) -> tuple[Scenario, int]:
     """The self-play run ``name`` of ``zoo`` as it continues: its scenario and seed; :class:`PecliError` if an
     option changes what a resumed run keeps, or ``selfplay.rounds`` is below the rounds it has played."""
     from pecli.rl.state import read_state

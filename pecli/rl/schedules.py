@@ -54,9 +54,20 @@ class RunLoop(Protocol):
     players: PoolPlayers
     opponents: OpponentRule
 
-    def publish(self, r: int, role: Role, source: Path, episodes: int, captures: int, opponents: list[dict[str, Any]],
-                pool_size: int, cpu_seconds: float, kind: str = MAIN, joined_by: str = "",
-                join_rate: float | None = None) -> None: ...
+    def publish(
+        self,
+        r: int,
+        role: Role,
+        source: Path,
+        episodes: int,
+        captures: int,
+        opponents: list[dict[str, Any]],
+        pool_size: int,
+        cpu_seconds: float,
+        kind: str = MAIN,
+        joined_by: str = "",
+        join_rate: float | None = None,
+    ) -> None: ...
 
     def save_state(self) -> None: ...
 
@@ -89,13 +100,20 @@ class Simultaneous:
         progress = {role: learners[role].progress(r) for role in ROLES}
         for role in ROLES:
             if progress[role] is None:
-                progress[role] = {"round": r, "start_steps": int(learners[role].model.num_timesteps), "cpu_seconds": 0.0,
-                                  "episodes": 0, "captures": 0}
+                progress[role] = {
+                    "round": r,
+                    "start_steps": int(learners[role].model.num_timesteps),
+                    "cpu_seconds": 0.0,
+                    "episodes": 0,
+                    "captures": 0,
+                }
         seed = turn_seed(loop.state.seed, r, "pursuer")
         if any(learners[role].model.num_timesteps > progress[role]["start_steps"] for role in ROLES):
             seed = resume_seed(seed, int(learners["pursuer"].model.num_timesteps))  # resumed inside: games of their own
-        stats = {role: EpisodeStats(episodes=progress[role]["episodes"], captures=progress[role]["captures"])
-                 for role in ROLES}
+        stats = {
+            role: EpisodeStats(episodes=progress[role]["episodes"], captures=progress[role]["captures"])
+            for role in ROLES
+        }
         for role in ROLES:
             model = learners[role].model
             end_episodes(model.replay_buffer)  # the games in flight end here
@@ -115,24 +133,33 @@ class Simultaneous:
             cpu = now  # counted once, even when a stop during the saves below commits again
             sources = {}
             for role in ROLES:
-                progress[role].update(cpu_seconds=progress[role]["cpu_seconds"] + share,
-                                      episodes=stats[role].episodes, captures=stats[role].captures)
+                progress[role].update(
+                    cpu_seconds=progress[role]["cpu_seconds"] + share,
+                    episodes=stats[role].episodes,
+                    captures=stats[role].captures,
+                )
                 episodes = sum(turn.episodes for turn in loop.state.turns if turn.role == role) + stats[role].episodes
                 run_cpu = loop.state.cpu_seconds() + sum(p["cpu_seconds"] for p in progress.values())
                 learner = learners[role]
-                sources[role] = learner.durable.save(learner.model, learner.fit, episodes, run_cpu, extra=dict(progress[role]))
+                sources[role] = learner.durable.save(
+                    learner.model, learner.fit, episodes, run_cpu, extra=dict(progress[role])
+                )
             return sources
 
-        stats["pursuer"].listeners.append(every_episodes(t.checkpoint_every, stats["pursuer"].episodes,
-                                                         lambda _: commit()))
-        remaining = max(progress[role]["start_steps"] + sp.steps_per_round - int(learners[role].model.num_timesteps)
-                        for role in ROLES)
+        stats["pursuer"].listeners.append(
+            every_episodes(t.checkpoint_every, stats["pursuer"].episodes, lambda _: commit())
+        )
+        remaining = max(
+            progress[role]["start_steps"] + sp.steps_per_round - int(learners[role].model.num_timesteps)
+            for role in ROLES
+        )
         title = f"round {r}/{sp.rounds} · pursuer and evader together (simultaneous)"
         target = int(learners["pursuer"].model.num_timesteps) + max(remaining, 0)
         display = ProgressDisplay(stats["pursuer"], target, title, enabled=loop.job.progress)
         callbacks = {
             "pursuer": [FiniteCheck(), *learners["pursuer"].callbacks, stats["pursuer"], display],
-            "evader": [FiniteCheck()] + [c for c in learners["evader"].callbacks if c is not learners["evader"].curriculum]
+            "evader": [FiniteCheck()]
+            + [c for c in learners["evader"].callbacks if c is not learners["evader"].curriculum]
             + [stats["evader"]],
         }
         try:
@@ -141,11 +168,24 @@ class Simultaneous:
             sources = commit()
             for role in ROLES:
                 other = opponent_of(role)
-                opponent = {"name": f"{other}-learner", "spec": "", "generation": r, "weight": 1.0,
-                            "episodes": stats[role].episodes,
-                            "opponent_wins": opponent_wins(role, stats[role])}
-                loop.publish(r, role, sources[role], stats[role].episodes, stats[role].captures, [opponent], 1,
-                              progress[role]["cpu_seconds"])
+                opponent = {
+                    "name": f"{other}-learner",
+                    "spec": "",
+                    "generation": r,
+                    "weight": 1.0,
+                    "episodes": stats[role].episodes,
+                    "opponent_wins": opponent_wins(role, stats[role]),
+                }
+                loop.publish(
+                    r,
+                    role,
+                    sources[role],
+                    stats[role].episodes,
+                    stats[role].captures,
+                    [opponent],
+                    1,
+                    progress[role]["cpu_seconds"],
+                )
             loop.save_state()
         except KeyboardInterrupt:
             commit()
@@ -178,7 +218,9 @@ class Alternating:
             if loop.state.latest(role) is not None:  # a new round: the learner moved on from last time's records
                 pool.decay(sp.pfsp_decay)
             meta_cpu = time.process_time()
-            weigh = loop.opponents.weigher(role, loop.state)  # with opponents nash, the meta-game's new pairings play here: their CPU counts
+            weigh = loop.opponents.weigher(
+                role, loop.state
+            )  # with opponents nash, the meta-game's new pairings play here: their CPU counts
             meta_cpu = time.process_time() - meta_cpu
             mixed = loop.players.mixture(loop.state.pools[other])
             mixed.weights = weigh(pool)
@@ -218,21 +260,32 @@ class Alternating:
             now = time.process_time()
             progress.update(tracker=tracker.to_dict(), cpu_seconds=progress["cpu_seconds"] + now - cpu)
             cpu = now
-            episodes = sum(turn.episodes for turn in loop.state.turns if turn.role == role and turn.learner == kind) \
+            episodes = (
+                sum(turn.episodes for turn in loop.state.turns if turn.role == role and turn.learner == kind)
                 + tracker.episodes
+            )
             run_cpu = loop.state.cpu_seconds() + progress["cpu_seconds"]
             return learner.durable.save(model, learner.fit, episodes, run_cpu, extra=dict(progress))
 
         tracker.listeners.append(every_episodes(t.checkpoint_every, tracker.episodes, lambda _: commit()))
         remaining = progress["start_steps"] + sp.steps_per_round - int(model.num_timesteps)
-        what = f"{role} exploiter vs the main {other}" if kind == EXPLOITER else \
-            f"{role} vs {len(pool.entries)} {other}s ({sp.opponents})"
-        display = RoundDisplay(tracker, sp.steps_per_round, f"round {r}/{sp.rounds} · {what}", enabled=loop.job.progress)
+        what = (
+            f"{role} exploiter vs the main {other}"
+            if kind == EXPLOITER
+            else f"{role} vs {len(pool.entries)} {other}s ({sp.opponents})"
+        )
+        display = RoundDisplay(
+            tracker, sp.steps_per_round, f"round {r}/{sp.rounds} · {what}", enabled=loop.job.progress
+        )
         try:
             try:
                 if remaining > 0:
-                    model.learn(remaining, callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
-                                reset_num_timesteps=False, tb_log_name=tensorboard_name(role, kind, r))
+                    model.learn(
+                        remaining,
+                        callback=CallbackList([FiniteCheck(), *learner.callbacks, tracker, display]),
+                        reset_num_timesteps=False,
+                        tb_log_name=tensorboard_name(role, kind, r),
+                    )
             finally:
                 display.close()
                 logger = getattr(model, "_logger", None)
@@ -243,8 +296,9 @@ class Alternating:
             commit()
             raise SelfPlayInterrupted(r, role if kind == MAIN else f"{role} exploiter") from None
 
-    def finish_turn(self, loop: RunLoop, r: int, role: Role, kind: str, tracker: PoolTracker,
-                    commit: Callable[[], Path]) -> None:
+    def finish_turn(
+        self, loop: RunLoop, r: int, role: Role, kind: str, tracker: PoolTracker, commit: Callable[[], Path]
+    ) -> None:
         """The learner's durable state first, then its round checkpoint, then selfplay.json (the commit of
         the turn): a stop in between resumes inside the turn with nothing left to train, and finishes it.
         A league's exploiter joins its side's pool if it won ``exploiter_join`` of its games (of its join games, with
@@ -252,8 +306,14 @@ class Alternating:
         starts afresh."""
         weights = dict(zip(tracker.opponent.names, tracker.opponent.weights))
         opponents = [
-            {"name": e.name, "spec": e.spec, "generation": e.generation, "weight": round(float(weights[e.name]), 4),
-             "episodes": tracker.per_opponent[e.name][0], "opponent_wins": tracker.per_opponent[e.name][1]}
+            {
+                "name": e.name,
+                "spec": e.spec,
+                "generation": e.generation,
+                "weight": round(float(weights[e.name]), 4),
+                "episodes": tracker.per_opponent[e.name][0],
+                "opponent_wins": tracker.per_opponent[e.name][1],
+            }
             for e in tracker.pool.entries
         ]
         lost = sum(o["opponent_wins"] for o in opponents)
@@ -267,8 +327,19 @@ class Alternating:
             joined_by = "win" if won else "timeout" if self.timed_out(loop, role) else ""
         source = commit()
         learner = loop.learners[role] if kind == MAIN else loop.exploiters[role]
-        loop.publish(r, role, source, tracker.episodes, tracker.captures, opponents, len(tracker.opponent.names),
-                      learner.durable.record.extra["cpu_seconds"], kind, joined_by, join_rate)
+        loop.publish(
+            r,
+            role,
+            source,
+            tracker.episodes,
+            tracker.captures,
+            opponents,
+            len(tracker.opponent.names),
+            learner.durable.record.extra["cpu_seconds"],
+            kind,
+            joined_by,
+            join_rate,
+        )
         loop.save_state()
         if joined_by:  # AlphaStar's exploiters start again once they join: a new learner, its old state gone
             loop.exploiters[role] = Learner(loop.job, role, tracker.opponent, loop.run_dir, loop.state, kind=EXPLOITER)
@@ -278,8 +349,13 @@ class Alternating:
         wins against ``target``, the main agent it trained against: both frozen, from start states seeded by the
         turn (a run resumed inside the turn plays the same games)."""
         learner = loop.exploiters[role]
-        captured = play_live(learner.train_job, learner.model, loop.players.player(opponent_of(role), target),
-                             loop.settings.exploiter_join_games, turn_seed(loop.state.seed, r, role, EXPLOITER) + 1)
+        captured = play_live(
+            learner.train_job,
+            learner.model,
+            loop.players.player(opponent_of(role), target),
+            loop.settings.exploiter_join_games,
+            turn_seed(loop.state.seed, r, role, EXPLOITER) + 1,
+        )
         return captured if role == "pursuer" else 1 - captured
 
     def timed_out(self, loop: RunLoop, role: Role) -> bool:

@@ -104,8 +104,14 @@ class SearchSpace(BaseModel):
                 overrides = _resolve({name: value}, base.training)
                 with_overrides(base, overrides, source=f"{source}: parameters.{name} = {value!r}")
         for name, parameter in self.parameters.items():
-            if parameter.algos and "algo" in self.parameters and not set(parameter.algos) & set(self.parameters["algo"].choices or []):
-                raise PecliError(f"{source}: parameters.{name} is for {', '.join(parameter.algos)}, which 'algo' never chooses")
+            if (
+                parameter.algos
+                and "algo" in self.parameters
+                and not set(parameter.algos) & set(self.parameters["algo"].choices or [])
+            ):
+                raise PecliError(
+                    f"{source}: parameters.{name} is for {', '.join(parameter.algos)}, which 'algo' never chooses"
+                )
 
 
 def load_space(path: str | Path | None, scenario: Scenario) -> tuple[SearchSpace, str]:

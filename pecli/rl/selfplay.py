@@ -89,7 +89,9 @@ class SelfPlay:
                 self.save_state()
         else:
             Run.check_new(job.zoo, job.name)
-            self.state = replace(initial_state(job.scenario, job.seed), cpu_hours=None if job.cpu_hours == KEEP else job.cpu_hours)
+            self.state = replace(
+                initial_state(job.scenario, job.seed), cpu_hours=None if job.cpu_hours == KEEP else job.cpu_hours
+            )
             self.run_dir = Run.create(job.zoo, job.name, job.scenario, {"command": "selfplay", "seed": job.seed})
             self.save_state()
         self.players = PoolPlayers(self.run_dir.path, self.scenario, job.seed)  # the pools' frozen players
@@ -139,9 +141,11 @@ class SelfPlay:
 
     def _budget_line(self) -> str:
         rounds = self.whole_rounds()
-        return (f"budget reached: {_hours(self.state.cpu_seconds(through=rounds), self.state.cpu_hours)} of "
-                f"{self.state.cpu_hours:g} "
-                f"CPU-h after round {rounds}")
+        return (
+            f"budget reached: {_hours(self.state.cpu_seconds(through=rounds), self.state.cpu_hours)} of "
+            f"{self.state.cpu_hours:g} "
+            f"CPU-h after round {rounds}"
+        )
 
     def plan(self) -> str:
         """What the run will do, in one line: rounds, steps, budget, schedule, opponents and belief."""
@@ -149,14 +153,22 @@ class SelfPlay:
         used = f" ({state.cpu_seconds() / 3600:.2f} used)" if state.turns else ""
         budget = "" if state.cpu_hours is None else f" or {state.cpu_hours:g} CPU-h{used}, whichever comes first,"
         opponents = f", opponents {sp.opponents}" if sp.schedule == "alternating" else ""
-        return (f"self-play {self.run_dir.path}: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of "
-                f"{sp.steps_per_round:,} steps per side{budget} on {self.scenario.name}, {sp.schedule}{opponents}, "
-                f"belief {self.scenario.training.belief}")
+        return (
+            f"self-play {self.run_dir.path}: {sp.rounds} round{'s' if sp.rounds > 1 else ''} of "
+            f"{sp.steps_per_round:,} steps per side{budget} on {self.scenario.name}, {sp.schedule}{opponents}, "
+            f"belief {self.scenario.training.belief}"
+        )
 
     def nothing_trained(self) -> str:
         """Why a call trained nothing, and which option continues the run."""
-        limits = [flag for flag, reached in (("--cpu-hours", self.budget_reached()),
-                                             ("--rounds", self.whole_rounds() >= self.settings.rounds)) if reached]
+        limits = [
+            flag
+            for flag, reached in (
+                ("--cpu-hours", self.budget_reached()),
+                ("--rounds", self.whole_rounds() >= self.settings.rounds),
+            )
+            if reached
+        ]
         verb = "continue" if len(limits) > 1 else "continues"
         return f"nothing to train: a larger {' and '.join(limits) or '--rounds'} {verb} the run"
 
@@ -165,9 +177,20 @@ class SelfPlay:
         paths = {role: self.run_dir.path / role / AVERAGE_FILE for role in ROLES}
         return {role: path for role, path in paths.items() if path.is_file()}
 
-    def publish(self, r: int, role: Role, source: Path, episodes: int, captures: int, opponents: list[dict[str, Any]],
-                 pool_size: int, cpu_seconds: float, kind: str = MAIN, joined_by: str = "",
-                 join_rate: float | None = None) -> None:
+    def publish(
+        self,
+        r: int,
+        role: Role,
+        source: Path,
+        episodes: int,
+        captures: int,
+        opponents: list[dict[str, Any]],
+        pool_size: int,
+        cpu_seconds: float,
+        kind: str = MAIN,
+        joined_by: str = "",
+        join_rate: float | None = None,
+    ) -> None:
         """Make the committed model ``source`` the checkpoint of round ``r`` of ``role``'s ``kind`` learner,
         add it to its side's pool (a main learner's always, an exploiter's if it joined: ``joined_by`` a reason)
         and record the turn (the caller saves the state)."""
@@ -186,10 +209,22 @@ class SelfPlay:
         relative = str(path.relative_to(self.run_dir.path))
         if kind == MAIN or joined_by:
             self.state.pools[role].add(f"{learner.folder}-r{r:03d}", relative, generation=r)
-        self.state.turns.append(Turn(round=r, role=role, steps=int(learner.model.num_timesteps), episodes=episodes,
-                                     captures=captures, cpu_seconds=round(cpu_seconds, 2), checkpoint=relative,
-                                     opponents=pool_size, learner=kind, joined=bool(joined_by), joined_by=joined_by,
-                                     join_rate=None if join_rate is None else round(join_rate, 4)))
+        self.state.turns.append(
+            Turn(
+                round=r,
+                role=role,
+                steps=int(learner.model.num_timesteps),
+                episodes=episodes,
+                captures=captures,
+                cpu_seconds=round(cpu_seconds, 2),
+                checkpoint=relative,
+                opponents=pool_size,
+                learner=kind,
+                joined=bool(joined_by),
+                joined_by=joined_by,
+                join_rate=None if join_rate is None else round(join_rate, 4),
+            )
+        )
 
     def save_state(self) -> None:
         atomic_write_json(self.run_dir.path / STATE_FILE, self.state.to_dict())
@@ -208,10 +243,16 @@ class SelfPlay:
             else:
                 tried = "" if turn.join_rate is None else f", {turn.join_rate:.2f} in its join games"
                 by_timeout = turn.joined_by == "timeout" or (  # a record older than joined_by: as it would be now
-                    not turn.joined_by and rate < self.settings.exploiter_join)
-                parts.append(f"{role} exploiter {what} vs the main {opponent_of(role)}{tried}"
-                             + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else ""))
+                    not turn.joined_by and rate < self.settings.exploiter_join
+                )
+                parts.append(
+                    f"{role} exploiter {what} vs the main {opponent_of(role)}{tried}"
+                    + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else "")
+                )
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
-        used = "" if self.state.cpu_hours is None else \
-            f"; {_hours(self.state.cpu_seconds(), self.state.cpu_hours)} of {self.state.cpu_hours:g} CPU-h"
+        used = (
+            ""
+            if self.state.cpu_hours is None
+            else f"; {_hours(self.state.cpu_seconds(), self.state.cpu_hours)} of {self.state.cpu_hours:g} CPU-h"
+        )
         return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s{used})"

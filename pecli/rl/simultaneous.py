@@ -33,8 +33,12 @@ def learn_simultaneously(models: dict[Role, Any], steps: int, callbacks: dict[Ro
     targets: dict[Role, int] = {}
     for role in ROLES:
         model = models[role]
-        targets[role], runs[role] = model._setup_learn(steps, CallbackList(callbacks[role]),  # plus its steps so far
-                                                       reset_num_timesteps=False, tb_log_name=role)
+        targets[role], runs[role] = model._setup_learn(
+            steps,
+            CallbackList(callbacks[role]),  # plus its steps so far
+            reset_num_timesteps=False,
+            tb_log_name=role,
+        )
         runs[role].on_training_start(locals(), globals())
     n = models["pursuer"].env.num_envs
     vector_steps = 0
@@ -42,8 +46,10 @@ def learn_simultaneously(models: dict[Role, Any], steps: int, callbacks: dict[Ro
         while any(models[role].num_timesteps < targets[role] for role in ROLES):
             for model in models.values():
                 model.policy.set_training_mode(False)
-            sampled = {role: models[role]._sample_action(models[role].learning_starts, models[role].action_noise, n)
-                       for role in ROLES}
+            sampled = {
+                role: models[role]._sample_action(models[role].learning_starts, models[role].action_noise, n)
+                for role in ROLES
+            }
             for role in ROLES:
                 models[role].env.step_async(sampled[role][0])
             results = {role: models[role].env.step_wait() for role in ROLES}
@@ -60,8 +66,16 @@ def learn_simultaneously(models: dict[Role, Any], steps: int, callbacks: dict[Ro
             runs[role].on_training_end()
 
 
-def _step(model: Any, callback: BaseCallback, buffer_action: np.ndarray, new_obs: dict[str, np.ndarray],
-          rewards: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]], vector_steps: int) -> bool:
+def _step(
+    model: Any,
+    callback: BaseCallback,
+    buffer_action: np.ndarray,
+    new_obs: dict[str, np.ndarray],
+    rewards: np.ndarray,
+    dones: np.ndarray,
+    infos: list[dict[str, Any]],
+    vector_steps: int,
+) -> bool:
     """One learner's share of a vector step, as SB3's ``collect_rollouts`` and ``learn`` do it; ``False`` to stop."""
     model.num_timesteps += len(dones)
     callback.update_locals({"new_obs": new_obs, "rewards": rewards, "dones": dones, "infos": infos})

@@ -159,8 +159,14 @@ def belief_kwargs(job: TrainJob) -> dict[str, Any]:
     window_length = -(-t.history_length // t.history_stride)  # observations in the window
     dim = _obs_dim(job.scenario, job.role)
     return {
-        "kind": t.belief, "window": [window_length, dim], "scenario": job.scenario.model_dump(mode="json"),
-        "role": job.role, "hidden": b.hidden, "fc": b.fc, "components": b.components, "samples": b.samples,
+        "kind": t.belief,
+        "window": [window_length, dim],
+        "scenario": job.scenario.model_dump(mode="json"),
+        "role": job.role,
+        "hidden": b.hidden,
+        "fc": b.fc,
+        "components": b.components,
+        "samples": b.samples,
         "frame": job.scenario.observation_frame,
     }
 
@@ -194,7 +200,9 @@ def make_model(job: TrainJob, env: FrozenOpponentVecEnv | BeliefVecEnv, tensorbo
     algorithm = get_algorithm(t.algo)
     kwargs: dict[str, Any] = {**policy_kwargs(t), "optimizer_kwargs": optimizer_kwargs(t)}
     if t.belief != "none":
-        kwargs.update(features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)})
+        kwargs.update(
+            features_extractor_class=BeliefExtractor, features_extractor_kwargs={"belief": belief_kwargs(job)}
+        )
     return algorithm.cls(
         algorithm.policy,
         env,
@@ -226,8 +234,9 @@ def attach_belief(job: TrainJob, env: Any, model: Any) -> FitBelief | None:
     return FitBelief(belief, env.buffer, job.scenario.training.belief_settings, job.scenario.arena.half)
 
 
-def make_learner(job: TrainJob, opponent: Any, seed: int, tensorboard: Path | None = None,
-                 view: Any = None) -> tuple[Any, Any, FitBelief | None]:
+def make_learner(
+    job: TrainJob, opponent: Any, seed: int, tensorboard: Path | None = None, view: Any = None
+) -> tuple[Any, Any, FitBelief | None]:
     """The learner's batched view (:func:`make_env`), its fresh model (:func:`make_model`) and the callback that
     fits its belief (:func:`attach_belief`; ``None`` where nothing is fitted), built in the order they need."""
     env = make_env(job, opponent, seed, view=view)
@@ -265,8 +274,9 @@ def resume_seed(seed: int, steps: int) -> int:
     return int(np.random.SeedSequence([seed, steps]).generate_state(1)[0] % 2**31)
 
 
-def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
-          report: Callable[[str], None] = lambda line: None) -> Path:
+def train(
+    job: TrainJob, on_start: Callable[[Run], None] | None = None, report: Callable[[str], None] = lambda line: None
+) -> Path:
     """Run ``job``; returns the final checkpoint.
 
     At every checkpoint the learner's durable state (:mod:`pecli.rl.durable`) is committed, so a run
@@ -286,11 +296,16 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
     else:
         Run.check_new(job.zoo, job.name)
         run, durable, record = None, None, None
-    env, model, fit = make_learner(job, opponent, job.seed if record is None else resume_seed(job.seed, record.steps),
-                                   job.zoo / job.name / "tb")
+    env, model, fit = make_learner(
+        job, opponent, job.seed if record is None else resume_seed(job.seed, record.steps), job.zoo / job.name / "tb"
+    )
     if run is None:
-        run = Run.create(job.zoo, job.name, job.scenario,
-                         {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed})
+        run = Run.create(
+            job.zoo,
+            job.name,
+            job.scenario,
+            {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed},
+        )
         durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
     else:
         run.log_command()
@@ -320,9 +335,14 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
 
     stats = EpisodeStats(episodes=episodes)
     every = t.checkpoint_every  # a checkpoint is named after the last boundary it passed
-    stats.listeners.append(every_episodes(every, episodes, lambda total: commit(
-        total, Run.episode_name(total // every * every))))
-    callbacks = [FiniteCheck(), stats, ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress)]
+    stats.listeners.append(
+        every_episodes(every, episodes, lambda total: commit(total, Run.episode_name(total // every * every)))
+    )
+    callbacks = [
+        FiniteCheck(),
+        stats,
+        ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress),
+    ]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
         curriculum = CurriculumCallback(job.scenario, t.curriculum.span(schedule))
@@ -343,12 +363,23 @@ def train(job: TrainJob, on_start: Callable[[Run], None] | None = None,
         def reported(steps: int, cpu: float, rate: float) -> None:
             digits = 1 if (job.cpu_budget or cpu) >= 300 else 2
             budget = f" of {job.cpu_budget / 60:.{digits}f}" if job.cpu_budget else ""
-            report(f"{job.name}: {steps:,} steps, {cpu / 60:.{digits}f}{budget} CPU-min, capture rate vs "
-                   f"{eval_opponent} {rate:.2f}")
+            report(
+                f"{job.name}: {steps:,} steps, {cpu / 60:.{digits}f}{budget} CPU-min, capture rate vs "
+                f"{eval_opponent} {rate:.2f}"
+            )
 
-        callbacks.append(Evaluation(evaluator(job, eval_opponent), t.eval_every, run.path / f"eval_{job.role}.csv",
-                                    cpu_seconds, save_best, maximise=job.role == "pursuer",
-                                    cpu_every=job.eval_cpu_every, on_record=reported))
+        callbacks.append(
+            Evaluation(
+                evaluator(job, eval_opponent),
+                t.eval_every,
+                run.path / f"eval_{job.role}.csv",
+                cpu_seconds,
+                save_best,
+                maximise=job.role == "pursuer",
+                cpu_every=job.eval_cpu_every,
+                on_record=reported,
+            )
+        )
 
     remaining = t.steps - model.num_timesteps
     try:
@@ -373,6 +404,7 @@ def forget_evaluations_after(log: Path, steps: int) -> None:
     if not log.is_file():
         return
     lines = log.read_text().splitlines(keepends=True)
+
     def before(line: str) -> bool:  # a whole row (a kill can leave half of one) written at most at ``steps``
         first = line.split(",", 1)[0]
         return line.endswith("\n") and first.isdigit() and int(first) <= steps
@@ -387,8 +419,10 @@ def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable
     in the same folder, after clearing what the stopped attempt left. A run written by an older pecli
     (``last.zip`` and pickled buffers, no durable state) is refused: its progress would be lost."""
     if run.checkpoint(job.role, LAST).is_file():
-        raise PecliError(f"run '{job.name}' was written by an older pecli (it has no {job.role}/{RESUME_DIR}/ state), "
-                         "which this one cannot resume; its checkpoints still play (with --trust): start a new run")
+        raise PecliError(
+            f"run '{job.name}' was written by an older pecli (it has no {job.role}/{RESUME_DIR}/ state), "
+            "which this one cannot resume; its checkpoints still play (with --trust): start a new run"
+        )
     durable.clear()
     (run.path / f"eval_{job.role}.csv").unlink(missing_ok=True)
     report(f"run '{job.name}' stopped before its first checkpoint: nothing to resume, starting it over")

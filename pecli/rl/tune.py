@@ -107,7 +107,10 @@ def open_storage(url: str) -> optuna.storages.RDBStorage:
     engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {}
     try:
         return optuna.storages.RDBStorage(
-            url, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_S, grace_period=GRACE_S,
+            url,
+            engine_kwargs=engine,
+            heartbeat_interval=HEARTBEAT_S,
+            grace_period=GRACE_S,
             heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2),
         )
     except Exception as exc:  # SQLAlchemy raises many kinds for a bad URL or an unreachable server
@@ -155,8 +158,11 @@ def stored_settings(study: optuna.Study) -> TuneSettings:
         settings = TuneSettings(**data)
     except TypeError as exc:
         raise PecliError(f"study '{study.study_name}': damaged settings ({exc})") from None
-    if not isinstance(settings.opponent, str | None) or not isinstance(settings.eval_opponents, list) or \
-            not all(isinstance(spec, str) for spec in settings.eval_opponents):
+    if (
+        not isinstance(settings.opponent, str | None)
+        or not isinstance(settings.eval_opponents, list)
+        or not all(isinstance(spec, str) for spec in settings.eval_opponents)
+    ):
         raise PecliError(f"study '{study.study_name}': damaged settings (opponents are not policy strings)")
     for spec in [settings.opponent or "", *settings.eval_opponents]:  # the study's storage may come from elsewhere
         if spec:
@@ -169,8 +175,11 @@ def run_workers(worker: Worker, jobs: int) -> None:
     os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the children before they import torch
     context = multiprocessing.get_context("spawn")
     children = [
-        context.Process(target=_child, args=(Worker(worker.storage, worker.study, worker.total, worker.folder,
-                                                    worker.device, worker.seed + j),), daemon=False)
+        context.Process(
+            target=_child,
+            args=(Worker(worker.storage, worker.study, worker.total, worker.folder, worker.device, worker.seed + j),),
+            daemon=False,
+        )
         for j in range(1, jobs)
     ]
     for child in children:
@@ -206,11 +215,13 @@ def optimize(worker: Worker) -> None:
     probe = optuna.load_study(study_name=worker.study, storage=store)
     settings = stored_settings(probe)
     study = optuna.load_study(
-        study_name=worker.study, storage=store,
+        study_name=worker.study,
+        storage=store,
         # multivariate TPE over groups of parameters that appear together (those of one algorithm);
         # constant liar keeps parallel workers from sampling the same point
-        sampler=optuna.samplers.TPESampler(seed=worker.seed, n_startup_trials=STARTUP_TRIALS, multivariate=True,
-                                           group=True, constant_liar=True),
+        sampler=optuna.samplers.TPESampler(
+            seed=worker.seed, n_startup_trials=STARTUP_TRIALS, multivariate=True, group=True, constant_liar=True
+        ),
         pruner=make_pruner(settings.pruner, settings.evaluations),
     )
     for number in reclaim_dead_trials(study):
@@ -221,7 +232,9 @@ def optimize(worker: Worker) -> None:
     states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
     objective = Objective(settings, worker.folder, worker.device)
     study.optimize(
-        objective, n_trials=left, catch=(PecliError, ValueError, RuntimeError),  # a failed trial, not a failed study
+        objective,
+        n_trials=left,
+        catch=(PecliError, ValueError, RuntimeError),  # a failed trial, not a failed study
         callbacks=[optuna.study.MaxTrialsCallback(worker.total, states=states), _reporter(worker.report)],
     )
 
@@ -229,7 +242,8 @@ def optimize(worker: Worker) -> None:
 def reclaim_dead_trials(study: optuna.Study) -> list[int]:
     """Fail the study's running trials whose worker ran on this machine and is gone (killed, or the machine
     restarted), and queue each again (as Optuna does for a trial whose heartbeat stopped, at most twice per trial,
-    without waiting out its grace period); returns their numbers. Trials run elsewhere wait for their heartbeat's grace period."""
+    without waiting out its grace period); returns their numbers. Trials run elsewhere wait for their
+    heartbeat's grace period."""
     host, reclaimed = socket.gethostname(), []
     retry = optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
     for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
@@ -289,19 +303,33 @@ class Objective:
         try:
             for i in range(s.repeats):
                 seed = s.seed + trial.number * s.repeats + i  # trial n's seeds: no other trial of the study uses them
-                scores.append(train(trial, scenario, seed, Clock(time.process_time(), s.budget_s, s.evaluations),
-                                    _Reporter(trial, scores, stride)))
+                scores.append(
+                    train(
+                        trial,
+                        scenario,
+                        seed,
+                        Clock(time.process_time(), s.budget_s, s.evaluations),
+                        _Reporter(trial, scores, stride),
+                    )
+                )
         finally:
             trial.set_user_attr("cpu_seconds", round(time.process_time() - start, 2))
             trial.set_user_attr("scores", scores)
         return float(sum(scores) / len(scores))
 
     # -- one role against a frozen opponent ------------------------------------------------------------------
-    def _one_role(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock,
-                  report: _Reporter) -> float:
+    def _one_role(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock, report: _Reporter) -> float:
         role: Role = self.settings.what  # type: ignore[assignment]
-        job = TrainJob(role=role, scenario=scenario, opponent=self.settings.opponent or "", zoo=self.folder,
-                       name=f"trial-{trial.number}", seed=seed, progress=False, device=self.device)
+        job = TrainJob(
+            role=role,
+            scenario=scenario,
+            opponent=self.settings.opponent or "",
+            zoo=self.folder,
+            name=f"trial-{trial.number}",
+            seed=seed,
+            progress=False,
+            device=self.device,
+        )
         t = scenario.training
         opponent = resolve_policy(job.opponent, opponent_of(role), scenario, seed=seed)
         env, model, fit = make_learner(job, opponent, seed)
@@ -321,14 +349,16 @@ class Objective:
         return budget.finish()
 
     # -- both roles by self-play ---------------------------------------------------------------------------
-    def _selfplay(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock,
-                  report: _Reporter) -> float:
+    def _selfplay(self, trial: optuna.Trial, scenario: Scenario, seed: int, clock: Clock, report: _Reporter) -> float:
         from pecli.rl.selfplay import SelfPlay, SelfPlayJob
 
         folder = self.folder / f"trial-{trial.number}-{seed}"
         shutil.rmtree(folder, ignore_errors=True)  # a trial run again after a kill starts afresh
-        loop = SelfPlay(SelfPlayJob(scenario=scenario, zoo=self.folder, name=folder.name, seed=seed, progress=False,
-                                    device=self.device))
+        loop = SelfPlay(
+            SelfPlayJob(
+                scenario=scenario, zoo=self.folder, name=folder.name, seed=seed, progress=False, device=self.device
+            )
+        )
         last: list[float] = []
 
         def after_round(r: int) -> bool:

@@ -30,7 +30,8 @@ def importances(study: optuna.Study) -> dict[str, float]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return optuna.importance.get_param_importances(
-                study, evaluator=optuna.importance.PedAnovaImportanceEvaluator())
+                study, evaluator=optuna.importance.PedAnovaImportanceEvaluator()
+            )
     except (ValueError, RuntimeError, ZeroDivisionError):
         return {}
 
@@ -41,28 +42,40 @@ def summary(study: optuna.Study, count: int = 10) -> str:
     trials = study.get_trials(deepcopy=False)
     counts = {state: sum(t.state == state for t in trials) for state in TrialState}
     lines = [
-        f"# Study `{study.study_name}`", "",
+        f"# Study `{study.study_name}`",
+        "",
         f"`pecli tune {s.what}` on `{s.scenario['name']}`"
         + (f" against `{s.opponent}`" if s.opponent else "")
-        + (f": {s.repeats} runs of {s.cpu_minutes:g} CPU-minutes per trial (the score is their mean), "
-           if s.repeats > 1 else f": {s.cpu_minutes:g} CPU-minutes per trial, ")
+        + (
+            f": {s.repeats} runs of {s.cpu_minutes:g} CPU-minutes per trial (the score is their mean), "
+            if s.repeats > 1
+            else f": {s.cpu_minutes:g} CPU-minutes per trial, "
+        )
         + f"{s.evaluations} evaluations of {s.eval_episodes} episodes"
-        f" against {', '.join(s.eval_opponents)}; pruner {s.pruner}.", "",
+        f" against {', '.join(s.eval_opponents)}; pruner {s.pruner}.",
+        "",
         f"Trials: {counts[TrialState.COMPLETE]} complete, {counts[TrialState.PRUNED]} pruned, "
-        f"{counts[TrialState.FAIL]} failed, {counts[TrialState.RUNNING]} running.", "",
+        f"{counts[TrialState.FAIL]} failed, {counts[TrialState.RUNNING]} running.",
+        "",
     ]
     best = best_trials(study, count)
     if best:
         names = list(dict.fromkeys(name for t in best for name in t.params))
         seeds = s.repeats > 1  # each seed's score beside the mean
-        lines += ["## Best trials", "", "| trial | score | " + ("per seed | " if seeds else "") + "CPU-min | "
-                  + " | ".join(names) + " |",
-                  "| ---: | ---: | " + ("--- | " if seeds else "") + "---: | " + " | ".join("---" for _ in names) + " |"]
+        lines += [
+            "## Best trials",
+            "",
+            "| trial | score | " + ("per seed | " if seeds else "") + "CPU-min | " + " | ".join(names) + " |",
+            "| ---: | ---: | " + ("--- | " if seeds else "") + "---: | " + " | ".join("---" for _ in names) + " |",
+        ]
         for t in best:
             cells = [_cell(t.params.get(name, "")) for name in names]
             each = " ".join(f"{v:.2f}" for v in t.user_attrs.get("scores", [])) + " | " if seeds else ""
-            lines.append(f"| {t.number} | {t.value:.3f} | {each}{t.user_attrs.get('cpu_seconds', 0) / 60:.1f} | "
-                         + " | ".join(cells) + " |")
+            lines.append(
+                f"| {t.number} | {t.value:.3f} | {each}{t.user_attrs.get('cpu_seconds', 0) / 60:.1f} | "
+                + " | ".join(cells)
+                + " |"
+            )
         lines.append("")
     shares = importances(study)
     if shares:
@@ -90,11 +103,14 @@ def write_report(study: optuna.Study, folder: Path) -> list[Path]:
     atomic_write_text(written[0], summary(study) + "\n")
     atomic_write_text(written[1], stored_settings(study).space_text)  # the search space as the user wrote it
     complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-    figures = {"history.png": lambda: plots.plot_optimization_history(study),
-               "intermediate.png": lambda: plots.plot_intermediate_values(study)}
+    figures = {
+        "history.png": lambda: plots.plot_optimization_history(study),
+        "intermediate.png": lambda: plots.plot_intermediate_values(study),
+    }
     if len(complete) >= 2 and importances(study):
         figures["importances.png"] = lambda: plots.plot_param_importances(
-            study, evaluator=optuna.importance.PedAnovaImportanceEvaluator())
+            study, evaluator=optuna.importance.PedAnovaImportanceEvaluator()
+        )
     for name, draw in figures.items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the matplotlib visualisations are flagged experimental
@@ -116,6 +132,8 @@ def profile(study: optuna.Study, name: str, trial: int | None = None) -> str:
     scenario = with_overrides(scenario, chosen.user_attrs["overrides"], source=f"trial {chosen.number}")
     data = scenario.model_dump(mode="json")
     data["name"] = name
-    data["description"] = (f"{scenario.description} -- training tuned by `pecli tune {s.what}` "
-                           f"(study {study.study_name}, trial {chosen.number}, score {chosen.value:.3f})")
+    data["description"] = (
+        f"{scenario.description} -- training tuned by `pecli tune {s.what}` "
+        f"(study {study.study_name}, trial {chosen.number}, score {chosen.value:.3f})"
+    )
     return yaml.safe_dump(data, sort_keys=False)

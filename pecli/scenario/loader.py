@@ -16,7 +16,10 @@ from pecli.scenario.schema import Scenario
 
 def builtin_config_dir() -> Path:
     """The folder holding the built-in ``configs/*.yaml`` (source checkout or installed data files)."""
-    for candidate in (Path(__file__).resolve().parents[2] / "configs", Path(sys.prefix) / "share" / "pecli" / "configs"):
+    for candidate in (
+        Path(__file__).resolve().parents[2] / "configs",
+        Path(sys.prefix) / "share" / "pecli" / "configs",
+    ):
         if candidate.is_dir():
             return candidate
     return Path("configs")
@@ -25,9 +28,21 @@ def builtin_config_dir() -> Path:
 BUILTIN_SCENARIOS = ("car_vs_car", "league", "paper", "point_mass", "quick", "robots", "tuned")
 
 
-BUILTIN_EXPERIMENTS = ("exploitability", "schedules", "smoke", "strength", "strength-exploiters", "strength-floor",
-                       "strength-joingames", "strength-lite", "strength-share", "strength-small", "table1",
-                       "table1-small", "table2")
+BUILTIN_EXPERIMENTS = (
+    "exploitability",
+    "schedules",
+    "smoke",
+    "strength",
+    "strength-exploiters",
+    "strength-floor",
+    "strength-joingames",
+    "strength-lite",
+    "strength-share",
+    "strength-small",
+    "table1",
+    "table1-small",
+    "table2",
+)
 """pecli's own scenarios and experiments, by name: a file a user saves beside them never becomes a built-in."""
 
 
@@ -117,8 +132,11 @@ class StrictLoader(yaml.SafeLoader):
                 continue
             if seen:
                 raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping", node.start_mark,
-                    f"duplicate key {key!r} (first given on line {first_line[key]})", key_node.start_mark)
+                    "while constructing a mapping",
+                    node.start_mark,
+                    f"duplicate key {key!r} (first given on line {first_line[key]})",
+                    key_node.start_mark,
+                )
             first_line[key] = key_node.start_mark.line + 1
         return super().construct_mapping(node, deep=deep)
 
@@ -131,8 +149,10 @@ def read_yaml(path: Path) -> Any:
     line (with the line number) if it cannot be read."""
     try:
         if path.stat().st_size > MAX_FILE_BYTES:
-            raise ConfigError(f"{path}: {path.stat().st_size:,} bytes is too large for a configuration file "
-                              f"(at most {MAX_FILE_BYTES:,})")
+            raise ConfigError(
+                f"{path}: {path.stat().st_size:,} bytes is too large for a configuration file "
+                f"(at most {MAX_FILE_BYTES:,})"
+            )
         return yaml.load(path.read_text(), Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)

@@ -62,8 +62,12 @@ def memory_estimate(scenario: Scenario) -> dict[str, int]:
     return estimate
 
 
-_UNITS = {"training.n_envs": "games", "training.buffer_size": "transitions",
-          "training.belief_settings.buffer_size": "pairs", "training.belief_settings.hidden": "LSTM units"}
+_UNITS = {
+    "training.n_envs": "games",
+    "training.buffer_size": "transitions",
+    "training.belief_settings.buffer_size": "pairs",
+    "training.belief_settings.hidden": "LSTM units",
+}
 
 
 def check_resources(scenario: Scenario, source: str = "<dict>") -> None:
@@ -72,8 +76,10 @@ def check_resources(scenario: Scenario, source: str = "<dict>") -> None:
     estimate = memory_estimate(scenario)
     n_envs = scenario.training.n_envs
     if n_envs > MAX_GAMES:
-        raise ConfigError(f"{source}: training.n_envs: {n_envs} games need {_size(estimate['training.n_envs'])}; "
-                          f"one process steps at most {MAX_GAMES} games")
+        raise ConfigError(
+            f"{source}: training.n_envs: {n_envs} games need {_size(estimate['training.n_envs'])}; "
+            f"one process steps at most {MAX_GAMES} games"
+        )
     total = sum(estimate.values())
     if total > MEMORY_LIMIT:
         key = max(estimate, key=estimate.__getitem__)
@@ -81,5 +87,7 @@ def check_resources(scenario: Scenario, source: str = "<dict>") -> None:
         for part in key.split(".")[1:]:
             value = getattr(value, part)
         what = f"{value} {_UNITS[key]}" if key in _UNITS else str(value)
-        raise ConfigError(f"{source}: {key}: {what} need {_size(estimate[key])} (a training process of this "
-                          f"scenario needs {_size(total)} in all; the limit is {_size(MEMORY_LIMIT)})")
+        raise ConfigError(
+            f"{source}: {key}: {what} need {_size(estimate[key])} (a training process of this "
+            f"scenario needs {_size(total)} in all; the limit is {_size(MEMORY_LIMIT)})"
+        )

@@ -161,5 +161,8 @@ class Scenario(_Model):
 
         exclude = {"name", "description", "training"}
         ours, theirs = (dotted(s.model_dump(exclude=exclude, mode="json")) for s in (self, other))
-        return [(key, ours.get(key), theirs.get(key)) for key in sorted(ours.keys() | theirs.keys())
-                if ours.get(key) != theirs.get(key)]
+        return [
+            (key, ours.get(key), theirs.get(key))
+            for key in sorted(ours.keys() | theirs.keys())
+            if ours.get(key) != theirs.get(key)
+        ]

@@ -13,6 +13,7 @@ import typer.rich_utils
 from pecli import __version__
 from pecli.cli import (
     config,
+    demo,
     experiment,
     exploit,
     export,
@@ -67,6 +68,7 @@ def _root(
         os.environ[TRUST_VARIABLE] = "1"  # read where files load, worker processes included
 
 
+app.command(name="demo", rich_help_panel="Start here")(demo.demo)
 app.command(name="play", rich_help_panel="Play and evaluate")(play.play)
 app.command(name="tournament", rich_help_panel="Play and evaluate")(tournament.tournament)
 app.command(name="train", rich_help_panel="Learn")(train.train)

@@ -496,7 +496,7 @@ def matrix(args: argparse.Namespace) -> None:
 def print_targets(
     table: dict[str, tuple[float, float]], roster: dict[str, list[tuple[str, str]]], short: set[str]
 ) -> None:
-    """Issue 19's targets: the hj pursuer captures at least as often as the best heuristic pursuer against
+    """The HJ targets: the hj pursuer captures at least as often as the best heuristic pursuer against
     every evader, and the hj evader is caught at most as often as the best heuristic evader by every pursuer.
     An opponent in ``short`` (a checkpoint keeping its 3.75 m sensor under full observation) plays another
     game than the value's, and its row says so instead."""

@@ -1,4 +1,4 @@
-"""Reliability figures (issues 20 and 21): bad inputs, hard kills, concurrent writers and NaN policies,
+"""Reliability figures: bad inputs, hard kills, concurrent writers and NaN policies,
 each through the real CLI (``python -m pecli ...``) in a subprocess.
 
     python benchmarks/bench_reliability.py                         # everything, a few CPU-minutes

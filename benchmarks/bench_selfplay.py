@@ -7,7 +7,7 @@ The run is ``pecli selfplay`` itself (resumed when it exists, so an interrupted 
 The round robin plays every pursuer generation (plus pure pursuit) against every evader generation
 (plus the greedy evader) with the same seeds (a ``pecli tournament`` over the run's checkpoints,
 cached in ``<run>/generations``), and prints the capture-rate matrix, draws it as a heatmap, and
-checks the issue's claim:
+checks the claim that later generations are stronger:
 
 * pursuers: against the evader of generation j, of two pursuers trained after it (generations
   j < i < i'), the later one captures more often. Reported as the share of such ordered pairs

@@ -9,7 +9,7 @@ the same number of episodes one at a time through the PettingZoo env, each polic
 batch of one (what a loop over a single-game env gives you). Both run on one process and one
 torch thread in the same run; the reference plays ``--reference-episodes`` per pairing and its
 rate is what is compared. ``--grid`` adds a timing of a full tournament with ``--workers`` worker
-processes, for the issue's target (8 x 8 players, 1500 episodes per pairing, <= 10 minutes).
+processes, for the target (8 x 8 players, 1500 episodes per pairing, <= 10 minutes).
 """
 
 from __future__ import annotations

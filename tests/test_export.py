@@ -517,7 +517,7 @@ def test_exported_policies_are_policies(exports, quick: Scenario) -> None:
     np.testing.assert_allclose(policy.command, actions * policy.model.limits, rtol=1e-6)
 
 
-# -- never export or command a broken policy (issue 21) ---------------------------------------------------------------
+# -- never export or command a broken policy ---------------------------------------------------------------
 def poisoned_copy(checkpoint: Path, name: str) -> Path:
     """A copy of ``checkpoint`` beside it whose actor's first layer is NaN (what a diverged training leaves)."""
     import io

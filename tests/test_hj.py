@@ -75,7 +75,7 @@ def random_states(n: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
 
 # ---------------------------------------------------------------------- solver
 def test_the_solver_agrees_with_the_closed_form(point_mass: Scenario) -> None:
-    """Equal accelerations (SPEC §6): the value is the closest approach at constant relative velocity."""
+    """Equal accelerations: the value is the closest approach at constant relative velocity."""
     problem = Problem.for_scenario(point_mass, "rel4d", (61, 21), "maxmin", steps=50)
     values = solve(problem)
     r, w = random_states(20_000)

@@ -1,4 +1,4 @@
-"""Run names stay inside their zoo, and a run folder has one writer at a time (issue 21)."""
+"""Run names stay inside their zoo, and a run folder has one writer at a time."""
 
 from __future__ import annotations
 

@@ -125,7 +125,7 @@ def test_fingerprint_tracks_the_game_not_the_name(paper) -> None:
     assert slower.fingerprint() != paper.fingerprint()
 
 
-# -- strict configs (issue 20): finite numbers, no duplicate keys, no bool/number mix-ups, plausible sizes ----------
+# -- strict configs: finite numbers, no duplicate keys, no bool/number mix-ups, plausible sizes ----------
 
 
 @pytest.mark.parametrize(

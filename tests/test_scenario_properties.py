@@ -1,4 +1,4 @@
-"""Property-based tests of the scenario loader (issue 20): random mutations of the built-in configs either
+"""Property-based tests of the scenario loader: random mutations of the built-in configs either
 load to a valid scenario or are refused with one line (:class:`ConfigError`), never another exception."""
 
 from __future__ import annotations

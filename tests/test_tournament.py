@@ -162,7 +162,7 @@ def test_sampling_without_checkpoints_is_refused(quick: Scenario) -> None:
         schedule(baselines(quick), sample=4)
 
 
-# -- process hygiene (issue 21): a killed tournament leaves no worker behind; one writer per --out --------------------
+# -- process hygiene: a killed tournament leaves no worker behind; one writer per --out --------------------
 def _parents() -> dict[int, int]:
     """PID -> parent PID of every live (not zombie) process, from /proc."""
     found = {}

@@ -320,7 +320,7 @@ def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> No
     assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"
 
 
-# -- a diverged training stops and writes nothing broken (issue 21) ----------------------------------------------------
+# -- a diverged training stops and writes nothing broken ----------------------------------------------------
 def test_a_diverging_run_stops_in_one_line_without_a_final_checkpoint(tmp_path: Path) -> None:
     """A learning rate of 1e30 is finite (strict configs take it) but makes the networks NaN within a few updates."""
     result = train(tmp_path, "--steps", "1000", "--set", "learning_rate=1e30")

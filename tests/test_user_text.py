@@ -115,3 +115,24 @@ def test_generated_reference_names_no_process_words():
 def test_changelog_names_no_process_words():
     hits = file_hits(ROOT / "CHANGELOG.md")
     assert not hits, "process words in CHANGELOG.md:\n" + "\n".join(hits)
+
+
+def test_code_and_configs_name_no_issues():
+    """Comments and docstrings of the code, the benchmarks and the shipped configs cite no issue or SPEC (code may
+    say ``session``: an onnxruntime session, an experiment's sessions)."""
+    not_session = PROCESS_WORDS[1:]
+    files = [
+        path
+        for base in ("pecli", "benchmarks", "tools", "configs", "examples", "wrappers", "tests")
+        for path in sorted((ROOT / base).rglob("*"))
+        if path.suffix in (".py", ".yaml", ".sh") and path.name != "test_user_text.py"
+    ]
+    assert len(files) > 100
+    hits = [
+        f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
+        for path in files
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if any(pattern.search(line) for pattern in not_session)
+    ]
+    hits += [hit for path in sorted((ROOT / "configs").rglob("*.yaml")) for hit in file_hits(path)]
+    assert not hits, "process words in code or configs:\n" + "\n".join(hits)

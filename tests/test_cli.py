@@ -192,10 +192,27 @@ def test_python_dash_m_and_console_script() -> None:
 
 @pytest.mark.parametrize(
     "args, message",
-    [(["train", "pursuerr"], "'pursuerr' is not one of"), (["play", "--nope"], "No such option: --nope")],
+    [
+        (["train", "pursuerr"], "Invalid value for 'role': 'pursuerr' is not one of 'pursuer', 'evader'."),
+        (["exploit", "--role", "both", "a", "b"], "'both' is not one of 'pursuer', 'evader'."),
+        (["play", "--nope"], "No such option: --nope"),
+        (["train"], "Missing argument 'role'. Choose from: pursuer, evader"),
+        (["zoo", "lst"], "No such command 'lst'."),
+    ],
 )
 def test_a_usage_error_is_one_line(args: list[str], message: str) -> None:
     result = invoke(*args)
     lines = result.output.strip().splitlines()
     assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+    assert "Value error" not in lines[0] and "╭" not in result.output  # no validator prefix, no boxed panel
     assert f"see `pecli {args[0]} --help`" in lines[0]
+
+
+def test_a_usage_error_is_one_line_from_the_shell() -> None:
+    """The entry point itself (not only the test runner) shows a misspelt role as one plain line."""
+    result = subprocess.run(
+        [sys.executable, "-m", "pecli", "train", "pursuerr"], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: Invalid value for 'role': 'pursuerr' is not one of")

@@ -68,11 +68,42 @@ def test_play_table() -> None:
 @pytest.mark.parametrize("suffix", [".png", ".gif"])
 def test_play_render(tmp_path: Path, suffix: str) -> None:
     out = tmp_path / f"episodes{suffix}"
-    result = invoke("play", "-c", "quick", "-n", "3", "--render", str(out))
+    result = invoke("play", "-c", "quick", "-n", "3", "-e", "rash", "--render", str(out))  # rash: caught in 5 s
     assert result.exit_code == 0, result.output
     assert out.stat().st_size > 1000
     assert out.read_bytes()[:4] == (b"\x89PNG" if suffix == ".png" else b"GIF8")
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left behind
+
+
+@pytest.mark.parametrize(
+    ("args", "played", "drawn", "said"),
+    [
+        (["-n", "8", "--render", "x.png"], 8, 8, "wrote x.png: the 8 episodes"),
+        (["-n", "20", "--render", "x.png"], 20, 16, "the first 16 of the 20 episodes (a drawing holds at most 16)"),
+        (["--render", "x.png"], 100, 16, "the first 16 of the 100 episodes"),
+        (["--render", "x.gif"], 1, 1, "wrote x.gif: the episode"),  # a GIF shows one episode: one is played
+        (["-n", "5", "--render", "x.gif"], 5, 1, "wrote x.gif: episode 1 of the 5"),
+    ],
+)
+def test_play_render_draws_what_it_plays(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, args: list[str], played: int, drawn: int, said: str
+) -> None:
+    import pecli.render
+
+    calls: list[tuple[int, str]] = []
+
+    def draw(recording, path, episodes=1, title=None, **_):  # records what play asks to draw, writes nothing
+        calls.append((min(episodes, recording.steps.shape[0]), title))
+        return path
+
+    monkeypatch.setattr(pecli.render, "draw_episodes", draw)
+    monkeypatch.setattr(pecli.render, "animate_episode", draw)
+    monkeypatch.chdir(tmp_path)
+    result = invoke("play", "-c", "quick", "--json", *args)
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["episodes"] == played
+    assert calls == [(drawn, "pure-pursuit vs greedy on quick (seed 0)")]
+    assert said in result.output
 
 
 @pytest.mark.parametrize(
@@ -192,10 +223,27 @@ def test_python_dash_m_and_console_script() -> None:
 
 @pytest.mark.parametrize(
     "args, message",
-    [(["train", "pursuerr"], "'pursuerr' is not one of"), (["play", "--nope"], "No such option: --nope")],
+    [
+        (["train", "pursuerr"], "Invalid value for 'role': 'pursuerr' is not one of 'pursuer', 'evader'."),
+        (["exploit", "--role", "both", "a", "b"], "'both' is not one of 'pursuer', 'evader'."),
+        (["play", "--nope"], "No such option: --nope"),
+        (["train"], "Missing argument 'role'. Choose from: pursuer, evader"),
+        (["zoo", "lst"], "No such command 'lst'."),
+    ],
 )
 def test_a_usage_error_is_one_line(args: list[str], message: str) -> None:
     result = invoke(*args)
     lines = result.output.strip().splitlines()
     assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+    assert "Value error" not in lines[0] and "╭" not in result.output  # no validator prefix, no boxed panel
     assert f"see `pecli {args[0]} --help`" in lines[0]
+
+
+def test_a_usage_error_is_one_line_from_the_shell() -> None:
+    """The entry point itself (not only the test runner) shows a misspelt role as one plain line."""
+    result = subprocess.run(
+        [sys.executable, "-m", "pecli", "train", "pursuerr"], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: Invalid value for 'role': 'pursuerr' is not one of")

@@ -689,3 +689,35 @@ def test_status_counts_the_pairings_a_stopped_stage_has_played(tmp_path: Path) -
         "tournament: stopped, 3/4 pairings played",
     ]
     assert stage_lines(tmp_path, state, alive=True)[1] == "tournament: running, 3/4 pairings played"
+
+
+def test_embedded_ray_starts_without_its_token_notice(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Starting Ray drops its notice that token authentication is on (its default), and only that: its other
+    warnings pass; nothing of Ray's output is forwarded and no dashboard is started."""
+    import logging
+
+    from pecli.experiment import ray_executor
+
+    started: list[dict] = []
+
+    def init(**options: object) -> None:  # Ray's start, as far as its logging goes
+        started.append(options)
+        notices = logging.getLogger(ray_executor.TOKEN_LOGGER)
+        notices.warning("Token authentication is enabled for this Ray cluster. Set RAY_AUTH_MODE=disabled to opt out.")
+        notices.warning("Token authentication is disabled for this Ray cluster. Anyone with network access ...")
+
+    monkeypatch.setattr(ray_executor.ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray_executor.ray, "init", init)
+    monkeypatch.setattr(ray_executor.ray, "shutdown", lambda: None)
+    monkeypatch.setenv(ray_executor.WORKER_NICENESS, "0")
+    shown: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: shown.append(record.getMessage()[:41])  # type: ignore[method-assign]
+    logging.getLogger(ray_executor.TOKEN_LOGGER).addHandler(handler)  # Ray's loggers do not reach the root's
+    try:
+        with ray_executor.RayCluster(cpus=1), ray_executor.RayCluster(cpus=1):
+            pass
+    finally:
+        logging.getLogger(ray_executor.TOKEN_LOGGER).removeHandler(handler)
+    assert shown == 2 * ["Token authentication is disabled for this"]
+    assert all(options["log_to_driver"] is False and options["include_dashboard"] is False for options in started)

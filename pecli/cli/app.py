@@ -87,7 +87,14 @@ def _usage_error(error: click.ClickException) -> None:
     where the help is, instead of Typer's boxed panel (its exit code stays click's, 2)."""
     ctx = getattr(error, "ctx", None)
     where = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
-    err_console.print(f"error: {error.format_message()}{where}", markup=False, highlight=False, soft_wrap=True)
+    err_console.print(
+        f"error: {_one_line(error.format_message())}{where}", markup=False, highlight=False, soft_wrap=True
+    )
+
+
+def _one_line(message: str) -> str:
+    """Click's message on one line: a missing choice's list joined, the validator's ``Value error,`` prefix dropped."""
+    return " ".join(message.replace("Value error, ", "").split())
 
 
 typer.rich_utils.rich_format_error = _usage_error  # typer.core calls it through the module: one place to change

@@ -26,7 +26,9 @@ from pecli.cli.common import (
 from pecli.errors import PecliError
 from pecli.match import Behaviour, play_match
 from pecli.policies import builtin_names, resolve_policy
+from pecli.render import MAX_PANELS
 
+EPISODES = 100  # played without --episodes (one with --render to a .gif)
 MAX_BEHAVIOUR = 10_000  # episodes recorded whole for --behaviour
 MAX_FRAMES = 10_000_000  # and their steps in all (a few hundred MB of states)
 POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
@@ -41,12 +43,23 @@ def play(
         str, typer.Option("--evader", "-e", help=POLICY_HELP.format(names=", ".join(builtin_names("evader"))))
     ] = "greedy",
     config: PlayersConfigOption = None,
-    episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes to play, all at once.")] = 100,
+    episodes: Annotated[
+        int | None,
+        typer.Option(
+            "--episodes",
+            "-n",
+            help=f"Episodes to play, all at once (default: {EPISODES}; 1 when --render writes a .gif).",
+            show_default=False,
+        ),
+    ] = None,
     seed: SeedOption = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the metrics as one JSON object.")] = False,
     render: Annotated[
         Path | None,
-        typer.Option("--render", help="Draw episodes: a .png of up to 4 episodes, or a .gif of the first one."),
+        typer.Option(
+            "--render",
+            help=f"Draw episodes: a .png of each (the first {MAX_PANELS} at most), or a .gif of the first one.",
+        ),
     ] = None,
     behaviour: Annotated[
         bool,
@@ -63,6 +76,9 @@ def play(
     The time-to-capture is normalised by the horizon T; a timeout counts 1.0.
     Episode i under one seed always starts from the same state, whoever plays it.
     """
+    gif = render is not None and render.suffix.lower() == ".gif"
+    if episodes is None:
+        episodes = 1 if gif else EPISODES  # a GIF shows one episode: play that one
     require_batch(episodes, "play fewer (a tournament plays more over several --seeds)")
     if behaviour and episodes > MAX_BEHAVIOUR:
         raise PecliError(f"--behaviour records every episode: play at most {MAX_BEHAVIOUR:,}")
@@ -79,7 +95,8 @@ def play(
     pursuer_policy = resolve_policy(pursuer, "pursuer", scenario)
     evader_policy = resolve_policy(evader, "evader", scenario)
     one_torch_thread()
-    record = 0 if render is None else (1 if render.suffix.lower() == ".gif" else 4)
+    record = 0 if render is None else (1 if gif else min(episodes, MAX_PANELS))
+    title = f"{pursuer} vs {evader} on {scenario.name} (seed {seed})"
 
     with Progress(
         TextColumn("[bold]playing[/] {task.description}"),
@@ -110,7 +127,7 @@ def play(
         )  # a share of no step (never saw it) is no number: null
         typer.echo(json.dumps(result.summary() | ({"behaviour": behaved} if behaved else {})))
     else:
-        table = Table(title=f"{pursuer} vs {evader} on {scenario.name} (seed {seed})")
+        table = Table(title=title)
         table.add_column("episodes", justify="right")
         table.add_column("capture rate", justify="right")
         table.add_column("time-to-capture (σ)", justify="right")
@@ -126,15 +143,15 @@ def play(
     if render is not None and recording is not None:
         from pecli.render import animate_episode, draw_episodes
 
-        if render.suffix.lower() == ".gif":
-            animate_episode(recording, render)
+        if gif:
+            animate_episode(recording, render, title=title)
             drawn = f"episode 1 of the {episodes}" if episodes > 1 else "the episode"
         else:
-            draw_episodes(recording, render, episodes=record)
+            draw_episodes(recording, render, episodes=record, title=title)
             drawn = (
-                f"the first {min(record, episodes)} of the {episodes} episodes"
+                f"the first {record} of the {episodes} episodes (a drawing holds at most {MAX_PANELS})"
                 if episodes > record
-                else f"the {episodes} episode{'s' if episodes > 1 else ''}"
+                else (f"the {episodes} episodes" if episodes > 1 else "the episode")
             )
         err_console.print(f"wrote {escape(str(render))}: {drawn}", highlight=False)
 

@@ -15,6 +15,7 @@ experiment's ``--out`` folder at the same path (a shared file system) and have p
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -35,6 +36,14 @@ from pecli.tournament import PairingJob, PairingResult, play_pairing
 OBJECT_STORE_BYTES = 200 * 1024**2  # embedded Ray: runs and pairings pass small objects only
 WORKER_NICENESS = "RAY_worker_niceness"  # Ray's setting of the niceness its workers add to the raylet's
 RETRIES = 3  # a task whose worker or node died is run again (it continues from its durable state)
+# Ray's notice on every start of a local cluster that it uses token authentication (its default): that one line
+# is dropped, its other warnings (authentication disabled, a missing token) still show
+TOKEN_NOTICE = "Token authentication is enabled for this Ray cluster"
+TOKEN_LOGGER = "ray._private.authentication.authentication_token_setup"
+
+
+def _not_the_token_notice(record: logging.LogRecord) -> bool:
+    return not record.getMessage().startswith(TOKEN_NOTICE)
 
 
 def _one_thread() -> None:
@@ -98,6 +107,9 @@ class RayCluster:
             # Ray starts its workers 15 steps nicer than itself; the runs are the work, so they run at the
             # driver's priority (`nice -n 10 pecli experiment run ...` puts them at 10)
             os.environ.setdefault(WORKER_NICENESS, "0")
+        notices = logging.getLogger(TOKEN_LOGGER)
+        if _not_the_token_notice not in notices.filters:
+            notices.addFilter(_not_the_token_notice)
         try:
             # "local" starts a new Ray even where `ray start` left a cluster's address behind (None would join it)
             ray.init(address=self.address or "local", **options)

@@ -260,9 +260,10 @@ def draw_episodes(recording: Recording, path: str | Path, episodes: int = MAX_PA
 
 def episode_animation(
     recording: Recording, episode: int = 0, title: str | None = None
-) -> tuple[Figure, Callable[[int], None], list[int]]:
-    """The figure of an animation of ``episode``, the function drawing frame ``t`` (a step) into it and the steps
-    to draw (at most about 200); the legend, right of the arena, and the title stay as they are frame to frame."""
+) -> tuple[Figure, Callable[[int], None], Callable[[int], np.ndarray], list[int]]:
+    """The figure of an animation of ``episode``, the function drawing frame ``t`` (a step) into it, the function
+    rendering frame ``t`` to pixels and the steps to draw (at most about 200); the arena, the legend right of it
+    and the title stay as they are frame to frame."""
     plt = _pyplot()
     end = int(recording.steps[episode])
     stride = max(1, math.ceil((end + 1) / 200))  # at most ~200 frames
@@ -277,36 +278,65 @@ def episode_animation(
         f"{title or recording.scenario.name}\nepisode {episode + 1}: {_outcome(recording, episode)}", fontsize=10
     )
     pursuer, evader = recording.pursuer[:, episode], recording.evader[:, episode]
+    _draw_arena(ax, recording)  # drawn once: a frame changes only the marks below, which are animated
+    trails = {role: ax.plot([], [], color=COLOURS[role], lw=1.0, animated=True)[0] for role in ROLES}
+    ax.title.set_animated(True)
+    marks: list[Artist] = []  # this frame's sensors, bodies, beliefs and capture mark
 
     def draw(t: int) -> None:
-        ax.clear()
-        _draw_arena(ax, recording)
+        for mark in marks:
+            mark.remove()
+        before = set(ax.get_children())
         for role, states, seen in (
             ("pursuer", pursuer, recording.seen_by_pursuer[:, episode]),
             ("evader", evader, recording.seen_by_evader[:, episode]),
         ):
-            ax.plot(states[: t + 1, 0], states[: t + 1, 1], color=COLOURS[role], lw=1.0)
+            trails[role].set_data(states[: t + 1, 0], states[: t + 1, 1])
             ax.add_patch(_sensor_patch(states[t], role, recording, alpha=0.18 if seen[t] else 0.07))
             ax.add_patch(_body_patch(states[t], role))
         for role in recording.beliefs:
             _draw_belief(ax, recording, role, episode, t)
         if t == end and recording.captured[episode]:
             ax.plot(*evader[t, :2], "kx", ms=12, mew=2, zorder=6)
+        marks[:] = [artist for artist in ax.get_children() if artist not in before]
+        for mark in marks:
+            mark.set_animated(True)
         ax.set_title(f"t = {t * recording.scenario.dt:.1f} s", fontsize=9)
 
-    return fig, draw, frames
+    def frame(t: int) -> np.ndarray:
+        """Frame ``t`` as RGBA pixels ``(height, width, 4)``: the still parts rendered once, the marks over them."""
+        draw(t)
+        if not background:
+            fig.canvas.draw()  # everything not animated: arena, axes, legend, title
+            background.append(fig.canvas.copy_from_bbox(fig.bbox))  # type: ignore[attr-defined]
+        fig.canvas.restore_region(background[0])  # type: ignore[attr-defined]
+        for artist in sorted([*trails.values(), *marks], key=lambda artist: artist.get_zorder()):
+            ax.draw_artist(artist)
+        ax.draw_artist(ax.title)
+        return np.asarray(fig.canvas.buffer_rgba()).copy()  # type: ignore[attr-defined]
+
+    background: list = []
+    return fig, draw, frame, frames
 
 
 def animate_episode(
     recording: Recording, path: str | Path, episode: int = 0, fps: int = 10, title: str | None = None
 ) -> Path:
     """Animate one recorded episode into a GIF, with trails and sensor footprints; returns the path."""
-    plt = _pyplot()
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from PIL import Image
 
-    fig, draw, frames = episode_animation(recording, episode, title)
-    animation = FuncAnimation(fig, draw, frames=frames)
-    with atomic_path(path) as tmp:
-        animation.save(tmp, writer=PillowWriter(fps=fps))
+    plt = _pyplot()
+    fig, _, frame, frames = episode_animation(recording, episode, title)
+    images = [Image.fromarray(frame(t)).convert("RGB") for t in frames]
     plt.close(fig)
+    palette = images[-1].quantize(colors=256)  # the last frame has every mark's colour: one palette for all
+    with atomic_path(path) as tmp:
+        images[0].quantize(palette=palette).save(
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=[image.quantize(palette=palette) for image in images[1:]],
+            duration=round(1000 / fps),
+            loop=0,
+        )
     return Path(path)

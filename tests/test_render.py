@@ -86,7 +86,7 @@ def test_the_legend_names_the_marks_drawn_and_no_others(recording: Recording) ->
 
 def test_an_animation_has_one_legend_beside_the_arena_and_its_outcome(recording: Recording) -> None:
     episode = int(np.flatnonzero(recording.captured)[0])
-    fig, draw, frames = episode_animation(with_belief(recording, "evader"), episode, title="a game")
+    fig, draw, frame, frames = episode_animation(with_belief(recording, "evader"), episode, title="a game")
     assert frames[0] == 0 and frames[-1] == recording.steps[episode] and len(frames) <= 201
     for t in (frames[0], frames[len(frames) // 2], frames[-1]):
         draw(t)  # a frame clears the arena, not the legend or the title
@@ -100,4 +100,7 @@ def test_an_animation_has_one_legend_beside_the_arena_and_its_outcome(recording:
     assert "darker: it sees its opponent" in shown and "capture (within 0.5 m)" in shown
     assert "evader's belief of where the pursuer is (1σ, 2σ)" in shown
     assert outside_every_arena(fig)
+    first, last = frame(frames[0]), frame(frames[-1])
+    assert first.shape[2] == 4 and (first != last).any()  # the marks moved over the still parts
+    assert (frame(frames[0]) == first).all()  # a frame leaves nothing of the one before it
     plt.close(fig)

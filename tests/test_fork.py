@@ -6,7 +6,9 @@ import json
 import subprocess
 from pathlib import Path
 
+from pecli.records import Turn
 from pecli.rl.pool import OpponentPool
+from pecli.rl.state import SelfPlayState
 
 
 def fork(run: str, *args: str):
@@ -25,7 +27,18 @@ def make_run(path: Path) -> dict:
     pools["evader"].add("greedy", "greedy", generation=0)
     pools["evader"].add("pursuer-r1", str(path / "pursuer" / "round-1.zip"), generation=1)
     pools["pursuer"].add("evader-r1", str(path / "evader" / "round-1.zip"), generation=1)
-    state = {"turns": [{"round": 1, "cpu_seconds": 1800.0}], "pools": {r: p.to_dict() for r, p in pools.items()}}
+    turn = Turn(
+        round=1,
+        role="pursuer",
+        steps=40_000,
+        episodes=90,
+        captures=45,
+        cpu_seconds=1800.0,
+        checkpoint="pursuer/round-1.zip",
+        opponents=2,
+    )
+    state = SelfPlayState(seed=0, curriculum_steps=300_000, pools=pools, turns=[turn]).to_dict()
+    state["turns"] = [turn.model_dump()]
     (path / "pursuer").mkdir(parents=True)
     (path / "pursuer" / "round-1.zip").write_bytes(b"weights")
     (path / "selfplay.json").write_text(json.dumps(state))

@@ -23,6 +23,7 @@ from pecli.io import read_json
 from pecli.rl.budget import budget_reached, whole_rounds
 from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE
 from pecli.rl.handover import stale_averages
+from pecli.rl.state import SelfPlayState, read_state_file
 from pecli.scenario import Training, dotted, read_yaml
 from pecli.zoo import FINAL, RESUME_DIR, Run
 
@@ -52,6 +53,14 @@ def _read_json(path: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+def _selfplay_state(path: Path) -> SelfPlayState | None:
+    """A self-play run's validated state; ``None`` when there is none yet or it is damaged (its trainer says so)."""
+    try:
+        return read_state_file(path)
+    except PecliError:
+        return None
+
+
 def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     """The run's progress from its files (cheap: a few small JSON files); all zeros for a run not started."""
     folder = zoo / run.name
@@ -63,8 +72,8 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
         done = (folder / role / f"{FINAL}.zip").is_file()
         return RunProgress(0, 0, steps, cpu, done)
     planned = run.scenario.training.selfplay.rounds
-    state = _read_json(folder / SELFPLAY_STATE) or {}
-    turns = state.get("turns", [])
+    state = _selfplay_state(folder / SELFPLAY_STATE)
+    turns = state.records() if state is not None else []
     settings = run.scenario.training.selfplay
     rounds = min(whole_rounds(turns, settings), planned)
     cpu = max(cpu, sum(float(t.get("cpu_seconds", 0.0)) for t in turns))
@@ -79,13 +88,10 @@ def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
 def averages_behind(run: RunSpec, zoo: Path) -> bool:
     """Whether a self-play run's averages lag its rounds (a stop came between a round's record and them): its
     task, even when the run is finished, has them to write (cheap: JSON files only)."""
-    state = _read_json(zoo / run.name / SELFPLAY_STATE) if run.selfplay else None
-    if state is None:
+    state = _selfplay_state(zoo / run.name / SELFPLAY_STATE) if run.selfplay else None
+    if state is None:  # none yet, or damaged: its trainer says so
         return False
-    try:
-        return bool(stale_averages(zoo / run.name, state["turns"], int(state["curriculum_steps"]), run.scenario))
-    except (KeyError, TypeError, ValueError):  # a damaged state: its trainer says so
-        return False
+    return bool(stale_averages(zoo / run.name, state.records(), state.curriculum_steps, run.scenario))
 
 
 def training_left(runs: Sequence[tuple[RunSpec, RunProgress]]) -> tuple[float, int]:

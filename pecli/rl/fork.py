@@ -10,11 +10,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json, read_json
+from pecli.io import atomic_write_json
 from pecli.policies.registry import BUILTINS
-from pecli.rl.budget import cpu_through
 from pecli.rl.handover import STATE_FILE
-from pecli.rl.pool import OpponentPool
+from pecli.rl.state import read_state_file
 
 
 def fork_run(source: Path, to: Path, add: Sequence[str] = ()) -> Path:
@@ -26,11 +25,8 @@ def fork_run(source: Path, to: Path, add: Sequence[str] = ()) -> Path:
         raise PecliError(f"{source}: not a self-play run (no {STATE_FILE})")
     if target.exists():
         raise PecliError(f"{target} exists: fork to another zoo")
-    state = read_json(state_path, "self-play state")
-    try:
-        pools = {role: OpponentPool.from_dict(data) for role, data in state["pools"].items()}
-    except (KeyError, TypeError, AttributeError, ValueError) as exc:
-        raise PecliError(f"{state_path}: damaged self-play state ({type(exc).__name__}: {exc})") from None
+    state = read_state_file(state_path)
+    pools = state.pools
     for name in add:
         if name not in BUILTINS:
             raise PecliError(f"cannot add {name}: not a scripted player ({', '.join(BUILTINS)})")
@@ -43,7 +39,7 @@ def fork_run(source: Path, to: Path, add: Sequence[str] = ()) -> Path:
     partial = to / f".{source.name}.partial"
     shutil.rmtree(partial, ignore_errors=True)
     shutil.copytree(source, partial, symlinks=True)
-    atomic_write_json(partial / STATE_FILE, {**state, "pools": {role: pool.to_dict() for role, pool in pools.items()}})
+    atomic_write_json(partial / STATE_FILE, state.to_dict())
     partial.rename(target)
     return target
 
@@ -51,7 +47,6 @@ def fork_run(source: Path, to: Path, add: Sequence[str] = ()) -> Path:
 def run_cpu_hours(run: Path) -> float:
     """CPU hours a self-play run has recorded in its finished turns (0 for a run without a readable state)."""
     try:
-        turns = read_json(run / STATE_FILE, "self-play state")["turns"]
-        return cpu_through(turns, float("inf")) / 3600
-    except (PecliError, KeyError, TypeError, ValueError, AttributeError):
+        return read_state_file(run / STATE_FILE).cpu_seconds() / 3600
+    except PecliError:
         return 0.0

@@ -22,7 +22,7 @@ from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.zoo import Run
 
-__all__ = ["SelfPlayState", "Turn", "checkpoint_name", "initial_state", "read_state", "round_of"]
+__all__ = ["SelfPlayState", "Turn", "checkpoint_name", "initial_state", "read_state", "read_state_file", "round_of"]
 
 
 @dataclass
@@ -78,6 +78,11 @@ def read_state(run: Run) -> SelfPlayState:
     path = run.path / STATE_FILE
     if not path.is_file():
         raise PecliError(f"run '{run.name}' is not a self-play run (no {STATE_FILE}): resume it with `pecli train`")
+    return read_state_file(path)
+
+
+def read_state_file(path: Path) -> SelfPlayState:
+    """The state in a ``selfplay.json`` at ``path``, validated; :class:`PecliError` if it is unreadable or damaged."""
     record = validated(SelfPlayRecord, read_json(path, "self-play state"), path, "self-play state")
     return SelfPlayState.from_record(record)
 

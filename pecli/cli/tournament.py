@@ -8,15 +8,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 
 from pecli.cli.common import (
     console,
@@ -29,6 +20,7 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.errors import PecliError
+from pecli.progress import WorkProgress
 
 
 @user_errors
@@ -128,23 +120,15 @@ def tournament(
                 highlight=False,
             )
 
-            with Progress(
-                TextColumn("[bold]pairings"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.fields[last]}"),
-                TimeElapsedColumn(),
-                TimeRemainingColumn(),
-                console=err_console,
-                transient=True,
-                disable=as_json or not err_console.is_terminal,
-            ) as progress:
-                task = progress.add_task("pairings", total=len(pairings), last="")
+            with WorkProgress("pairings", len(pairings), err_console, enabled=not as_json) as progress:
+                done = 0
 
                 def report(result, cached: bool) -> None:
+                    nonlocal done
+                    done += 1
                     note = " (cached)" if cached else ""
-                    last = escape(f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
-                    progress.update(task, advance=1, last=last)
+                    last = f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}"
+                    progress.update(done, note=last, skipped=1 if cached else 0)
 
                 results = run_tournament(
                     scenario,

@@ -16,6 +16,7 @@ from pecli.cli.common import (
     sigterm_stops,
     user_errors,
 )
+from pecli.progress import LOG_EVERY
 from pecli.scenario import ALGOS, load_scenario
 
 
@@ -121,6 +122,7 @@ def train(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        log_every=None if quiet or err_console.is_terminal else LOG_EVERY,
         curriculum_steps=curriculum_steps,
         device=device,
     )

@@ -78,10 +78,11 @@ def tournament(
     """
     from pecli.locks import locked
     from pecli.reports import (
+        TABLE_WIDTH,
         nash_record,
         nash_table,
         ratings_table,
-        results_table,
+        results_tables,
         write_nash,
         write_reports,
     )
@@ -151,7 +152,8 @@ def tournament(
                 typer.echo(json.dumps(data, indent=2))
                 return
             if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
-                console.print(results_table(results))
+                for table in results_tables(results, min(console.width, TABLE_WIDTH)):
+                    console.print(table)
             console.print(ratings_table(results, limit=40))
             if game is not None:
                 console.print(nash_table(game, limit=40))

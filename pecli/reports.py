@@ -17,7 +17,8 @@ from pecli.policies.nash import NASH_FILE
 from pecli.tournament import TournamentResults
 
 TABLE_WIDTH = 120
-"""Columns a printed table may take at most: a grid wider than that is printed numbered (:func:`results_tables`)."""
+"""Columns a printed table may take at most (as ``pecli.cli.common.TABLE_WIDTH``): a grid wider than that is printed
+numbered (:func:`results_tables`)."""
 
 
 def results_table(results: TournamentResults) -> Table:

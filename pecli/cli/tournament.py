@@ -151,12 +151,13 @@ def tournament(
                     data["nash"] = nash_record(results, game)
                 typer.echo(json.dumps(data, indent=2))
                 return
+            width = min(console.width, TABLE_WIDTH)
             if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
-                for table in results_tables(results, min(console.width, TABLE_WIDTH)):
-                    console.print(table)
-            console.print(ratings_table(results, limit=40))
+                for table in results_tables(results, width):
+                    console.print(table, width=width)
+            console.print(ratings_table(results, limit=40), width=width)
             if game is not None:
-                console.print(nash_table(game, limit=40))
+                console.print(nash_table(game, limit=40), width=width)
                 err_console.print(
                     f"the mixture plays as nash:{out} (each game draws one member by its weight)",
                     highlight=False,

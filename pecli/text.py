@@ -43,12 +43,15 @@ def _decimals(value: float) -> int:
 
 
 def duration(seconds: float) -> str:
-    """Seconds as a short duration for people: ``45 s``, ``12 min``, ``3 h 20 min``, ``2 d 5 h``."""
+    """Seconds as a short duration for people: ``45 s``, ``2 min 30 s``, ``12 min``, ``3 h 20 min``, ``2 d 5 h``."""
     if not math.isfinite(seconds):
         return "?"
     seconds = max(0.0, seconds)
-    if seconds < 60:
+    if seconds < 59.5:
         return f"{seconds:.0f} s"
+    if seconds < 599.5:  # under ten minutes, to the second
+        minutes, rest = divmod(round(seconds), 60)
+        return f"{minutes} min {rest} s" if rest else f"{minutes} min"
     minutes = round(seconds / 60)
     if minutes < 60:
         return f"{minutes} min"

@@ -54,8 +54,10 @@ def test_cpu_time_puts_both_in_one_unit_with_the_same_decimals(
 
 
 def test_duration() -> None:
-    assert [duration(s) for s in (12, 600, 3600 * 3 + 1200, 3600 * 26, float("inf"))] == [
+    assert [duration(s) for s in (12, 59.7, 150, 600, 3600 * 3 + 1200, 3600 * 26, float("inf"))] == [
         "12 s",
+        "1 min",
+        "2 min 30 s",
         "10 min",
         "3 h 20 min",
         "1 d 2 h",
@@ -70,13 +72,13 @@ def test_periodic_lines_come_every_interval_with_an_eta() -> None:
     assert not progress.update(100) and lines == []  # not yet 30 s
     clock.now += 20
     assert progress.update(250)
-    assert lines == ["train: 250/1,000 steps (25%), cpu, 30 s elapsed, about 2 min left"]  # 750 at 250 per 30 s
+    assert lines == ["train: 250/1,000 steps (25%), cpu, 30 s elapsed, about 1 min 30 s left"]  # 750 at 250 per 30 s
     clock.now += 5
     progress.update(300)
     assert len(lines) == 1  # 5 s after the last line
     clock.now += 30
     progress.update(1000)
-    assert lines[-1] == "train: 1,000/1,000 steps (100%), cpu, 1 min elapsed"  # done: no time left to tell
+    assert lines[-1] == "train: 1,000/1,000 steps (100%), cpu, 1 min 5 s elapsed"  # done: no time left to tell
 
 
 def test_periodic_lines_leave_resumed_and_cached_work_out_of_the_rate() -> None:
@@ -97,7 +99,7 @@ def test_work_progress_prints_plain_lines_without_a_terminal() -> None:
             progress.update(done, note=f"step {done}")
     shown = out.getvalue().splitlines()
     assert len(shown) == 4  # one line every 30 s of the 120 s
-    assert shown[0] == "solving: 10/40 steps (25%), 30 s elapsed, about 2 min left"  # 90 s, rounded
+    assert shown[0] == "solving: 10/40 steps (25%), 30 s elapsed, about 1 min 30 s left"
     quiet = io.StringIO()
     with WorkProgress("solving", 40, Console(file=quiet), enabled=False, clock=clock) as progress:
         clock.now += 100

@@ -11,6 +11,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from pecli.text import article
+
 
 def _read_umask() -> int:
     mask = os.umask(0)
@@ -76,7 +78,7 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
         with path.open("rb") as handle:
             data = handle.read(max_bytes + 1)  # bounded whatever the size the file system reports
         if len(data) > max_bytes:
-            raise PecliError(f"{path}: more bytes than a {what} can be ({max_bytes:,})")
+            raise PecliError(f"{path}: more bytes than {article(what)} can be ({max_bytes:,})")
         return json.loads(data.decode("utf-8"))
     except FileNotFoundError:
         raise PecliError(f"{path}: no {what} there") from None

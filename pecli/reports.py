@@ -6,6 +6,8 @@ import csv
 from pathlib import Path
 
 import numpy as np
+from rich.console import Console, RenderableType
+from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
@@ -13,6 +15,10 @@ from pecli.io import atomic_path, atomic_write_json
 from pecli.metagame import WEIGHT_FLOOR, MetaGame
 from pecli.policies.nash import NASH_FILE
 from pecli.tournament import TournamentResults
+
+TABLE_WIDTH = 120
+"""Columns a printed table may take at most (as ``pecli.cli.common.TABLE_WIDTH``): a grid wider than that is printed
+numbered (:func:`results_tables`)."""
 
 
 def results_table(results: TournamentResults) -> Table:
@@ -42,6 +48,76 @@ def results_table(results: TournamentResults) -> Table:
             cells.append(f"[bold]{text}[/]" if (pursuer, evader) in best else text)
         table.add_row(evader, *cells)
     return table
+
+
+def _natural_width(renderable: RenderableType) -> int:
+    """Columns ``renderable`` takes when nothing limits it."""
+    console = Console(width=10_000)
+    return Measurement.get(console, console.options, renderable).maximum
+
+
+def results_tables(results: TournamentResults, width: int = TABLE_WIDTH) -> list[RenderableType]:
+    """The paper's Table I layout (:func:`results_table`) when it fits ``width`` columns; else a numbered list of
+    the players and the capture rates in a grid with numbered columns (:func:`numbered_grids`), split in parts
+    that fit."""
+    table = results_table(results)
+    if _natural_width(table) <= width:
+        return [table]
+    return [players_legend(results), *numbered_grids(results, width)]
+
+
+def players_legend(results: TournamentResults) -> Table:
+    """The players with the numbers a numbered grid heads its columns (P1, P2, ...) and rows (E1, ...) with."""
+    table = Table(title=f"{results.scenario.name}: players")
+    for column in ("", "pursuer", " ", "evader"):
+        table.add_column(column, justify="right" if column.strip() == "" else "left", overflow="fold")
+    pursuers, evaders = results.players["pursuer"], results.players["evader"]
+    for i in range(max(len(pursuers), len(evaders))):
+        row = []
+        for mark, players in (("P", pursuers), ("E", evaders)):
+            row += [f"{mark}{i + 1}", Text(players[i].name)] if i < len(players) else ["", ""]
+        table.add_row(*row)
+    return table
+
+
+def numbered_grids(results: TournamentResults, width: int = TABLE_WIDTH) -> list[Table]:
+    """Capture rates with evaders as rows (E1, E2, ...) and pursuers as columns (P1, P2, ...), as many columns a
+    part as fit ``width``; bold as in :func:`results_table`."""
+    grid, best = results.grid(), results.best_in_row()
+    pursuers = [p.name for p in results.players["pursuer"]]
+    evaders = [e.name for e in results.players["evader"]]
+
+    def part(first: int, last: int) -> Table:
+        shown = "" if (first, last) == (0, len(pursuers)) else f" (pursuers P{first + 1}-P{last})"
+        table = Table(
+            title=f"{results.scenario.name}: capture rate{shown}, {results.episodes} episodes × "
+            f"{len(results.seeds)} seeds per pairing",
+            caption="bold: the best pursuer against that evader, or tied with it (two-proportion z-test, "
+            "p > 0.05); time-to-capture per pairing in results.csv",
+            box=None,
+            collapse_padding=True,
+            header_style="bold underline",
+        )
+        table.add_column("", style="bold", justify="right")
+        for j in range(first, last):
+            table.add_column(f"P{j + 1}", justify="right", no_wrap=True)
+        for i, evader in enumerate(evaders):
+            cells = []
+            for pursuer in pursuers[first:last]:
+                r = grid.get((pursuer, evader))
+                text = "-" if r is None else f"{r.capture_rate:.2f}"
+                cells.append(Text(text, style="bold" if (pursuer, evader) in best else "dim" if r is None else ""))
+            table.add_row(f"E{i + 1}", *cells)
+        return table
+
+    parts, first = [], 0
+    while first < len(pursuers):
+        last = first + 1  # one column always, however narrow ``width``
+        while last < len(pursuers) and _natural_width(part(first, last + 1)) <= width:
+            last += 1
+        parts.append(part(first, last))
+        first = last
+    return parts
 
 
 def ratings_table(results: TournamentResults, limit: int | None = None) -> Table:

@@ -112,8 +112,9 @@ def _checkpoint_player(path: Path, scenario: Scenario, skipped: list[str]) -> Pl
     if isinstance(meta, str):
         skipped.append(meta)
         return None
-    name = f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
-    return Player(name=name, spec=str(path.resolve()), role=meta.role, identity=file_digest(path))
+    return Player(
+        name=_checkpoint_name(path, meta), spec=str(path.resolve()), role=meta.role, identity=file_digest(path)
+    )
 
 
 def _exported_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player | None:
@@ -153,11 +154,33 @@ def _file_player(path: Path, scenario: Scenario, skipped: list[str]) -> Player |
 
 
 def _unique_names(players: list[Player]) -> list[Player]:
-    """Players whose names collide (two runs of one name in two zoos) get their path instead."""
-    counts: dict[str, int] = {}
+    """Players whose names collide (two runs of one name in two zoos) get as much of their path as tells them
+    apart (``zoo-a/ours/pursuer/final``); the whole path only where nothing less does."""
+    groups: dict[str, list[Player]] = {}
     for player in players:
-        counts[player.name] = counts.get(player.name, 0) + 1
-    return [replace(p, name=str(Path(p.spec).with_suffix(""))) if counts[p.name] > 1 else p for p in players]
+        groups.setdefault(player.name, []).append(player)
+    renamed: dict[str, str] = {}  # identity -> name
+    for name, group in groups.items():
+        if len(group) < 2:
+            continue
+        paths = [Path(p.spec).with_suffix("").parts for p in group]
+        for depth in range(name.count("/") + 2, max(len(parts) for parts in paths) + 1):
+            names = ["/".join(parts[-depth:]) for parts in paths]
+            if len(set(names)) == len(names):
+                break
+        else:
+            names = [str(Path(p.spec).with_suffix("")) for p in group]
+        renamed.update({p.identity: n for p, n in zip(group, names)})
+    return [replace(p, name=renamed[p.identity]) if p.identity in renamed else p for p in players]
+
+
+def _checkpoint_name(path: Path, meta: CheckpointMeta) -> str:
+    """A checkpoint's player name, relative to its zoo: ``run/folder/checkpoint`` (``ours/pursuer/final``,
+    ``league/exploiter-evader/round-003``); the run and role of its metadata for a file outside a run folder."""
+    run = path.parent.parent
+    if (run / "config.yaml").is_file():
+        return f"{run.name}/{path.parent.name}/{path.stem}"
+    return f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
 
 
 def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:

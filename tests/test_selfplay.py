@@ -412,8 +412,8 @@ def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None
     result = invoke(*args, "--cpu-hours", "1e-9")  # any round reaches it
     assert result.exit_code == 0, result.output
     assert "or 1e-09 CPU-h, whichever comes first, on quick" in result.output
-    assert re.search(r"round 1/3: .* CPU-s; [0-9.e-]+ of 1e-09 CPU-h\)", result.output)  # each round says what is used
-    assert re.search(r"budget reached: [0-9.e-]+ of 1e-09 CPU-h after round 1", result.output)
+    assert re.search(r"round 1/3: .* CPU-s; run [0-9.]+ of 0\.00000\d+ CPU-s\)", result.output)  # what is used
+    assert re.search(r"budget reached: [0-9.]+ of 0\.00000\d+ CPU-s after round 1", result.output)
     assert "round 2/3" not in result.output
     assert "to hand over" in result.output and json.loads(state_file.read_text())["cpu_hours"] == 1e-9
     resume = ["selfplay", "--zoo", str(tmp_path), "--name", "cpu", "--resume", "-q"]
@@ -427,7 +427,7 @@ def test_a_cpu_budget_stops_the_run_and_the_run_keeps_it(tmp_path: Path) -> None
     assert not (tmp_path / "cpu" / "pursuer" / "round-002.zip").exists()
     result = invoke(*resume, "--cpu-hours", "1000")  # a new budget replaces it: on to the ceiling of rounds
     assert result.exit_code == 0 and "round 3/3" in result.output and "budget reached" not in result.output
-    assert re.search(r"or 1000 CPU-h \(0\.\d\d used\)", result.output)
+    assert re.search(r"or 1000 CPU-h \([0-9.]+ CPU-s used\)", result.output)
     assert json.loads(state_file.read_text())["cpu_hours"] == 1000
     result = invoke(*resume)
     assert "nothing to train: a larger --rounds continues the run" in result.output

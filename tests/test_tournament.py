@@ -147,14 +147,14 @@ def test_a_damaged_cache_entry_is_played_again(quick: Scenario, tmp_path: Path) 
     assert cached == [False]
 
 
-def test_colliding_names_become_paths() -> None:
+def test_colliding_names_get_the_part_of_their_path_that_tells_them_apart() -> None:
     from pecli.tournament import _unique_names
 
     a = Player(name="ours/pursuer/final", spec="/z1/ours/pursuer/final.zip", role="pursuer", identity="1")
     b = Player(name="ours/pursuer/final", spec="/z2/ours/pursuer/final.zip", role="pursuer", identity="2")
     c = Player(name="other/pursuer/final", spec="/z2/other/pursuer/final.zip", role="pursuer", identity="3")
     names = [p.name for p in _unique_names([a, b, c])]
-    assert names == ["/z1/ours/pursuer/final", "/z2/ours/pursuer/final", "other/pursuer/final"]
+    assert names == ["z1/ours/pursuer/final", "z2/ours/pursuer/final", "other/pursuer/final"]
 
 
 def test_sampling_without_checkpoints_is_refused(quick: Scenario) -> None:
@@ -329,3 +329,55 @@ def test_the_heatmap_of_a_small_grid_with_long_names_fits_them(tmp_path: Path) -
         warnings.simplefilter("error")
         path = heatmap(results, tmp_path / "capture_rates.png")  # type: ignore[arg-type]
     assert path.stat().st_size > 1000
+
+
+def zoo_results(scenario: Scenario, pursuers: int, evaders: int, run: str = "league-seed-"):
+    """Results of a tournament of a league's zoo: ``pursuers`` × ``evaders`` players with run/folder/round names."""
+    from pecli.stats import Rating
+    from pecli.tournament import PairingResult, TournamentResults
+
+    def players(role: str, count: int) -> list[Player]:
+        return [
+            Player(f"{run}{i % 3}/exploiter-{role}/round-{i:03d}", f"/zoo/{role}{i}.zip", role, f"{role}{i}")
+            for i in range(count)
+        ]
+
+    found = {"pursuer": players("pursuer", pursuers), "evader": players("evader", evaders)}
+    pairings = [
+        PairingResult(p.name, e.name, 100, (7 * i + 3 * j) % 101, 0.5, 0.25)
+        for j, e in enumerate(found["evader"])
+        for i, p in enumerate(found["pursuer"])
+    ]
+    ratings = [Rating(p.name, 1000.0 - i, 12.0, 100) for i, p in enumerate(found["pursuer"] + found["evader"])]
+    return TournamentResults(scenario, found, pairings, ratings, 50, [0, 1])
+
+
+@pytest.mark.parametrize("size", [19, 40])
+def test_the_tables_of_a_zoo_of_any_size_fit_120_columns(quick: Scenario, size: int) -> None:
+    """A small grid keeps the paper's layout with names; a large one numbers its players and splits as it must."""
+    import io
+
+    from rich.console import Console
+
+    from pecli.reports import ratings_table, results_tables
+
+    results = zoo_results(quick, size, size)
+    out = io.StringIO()
+    console = Console(file=out, width=120, force_terminal=False)
+    tables = results_tables(results, width=120)
+    for table in [*tables, ratings_table(results, limit=40)]:
+        console.print(table)
+    shown = out.getvalue()
+    assert max(len(line) for line in shown.splitlines()) <= 120
+    assert "P1 " in shown and f"E{size}" in shown and f"P{size}" in shown  # numbered
+    assert f"league-seed-{(size - 1) % 3}/exploiter-pursuer/round-{size - 1:03d}" in shown  # the legend names all
+    assert len(tables) == (2 if size == 19 else 3)  # the legend, then the grid in as many parts as it needs
+    last = f"{(7 * (size - 1) + 3 * (size - 1)) % 101 / 100:.2f}"
+    assert any(line.split()[:1] == [f"E{size}"] and line.rstrip().endswith(last) for line in shown.splitlines())
+
+
+def test_a_small_grid_keeps_the_paper_layout_with_names(quick: Scenario) -> None:
+    from pecli.reports import results_tables
+
+    (table,) = results_tables(zoo_results(quick, 2, 2, run="s"), width=120)
+    assert [column.header for column in table.columns][1:] == [f"s{i}/exploiter-pursuer/round-00{i}" for i in range(2)]

@@ -204,3 +204,22 @@ def test_average_refuses_checkpoints_of_different_networks(zoo: Path, tmp_path: 
     result = invoke("zoo", "average", str(zoo / "p" / "pursuer"), "--last", "50")
     assert result.exit_code == 1 and "fewer than --last 50" in result.output
     assert not (tmp_path / "mix.zip").exists()
+
+
+def test_list_names_a_leagues_exploiters_by_their_folder_and_fits_120_columns(zoo: Path, tmp_path: Path) -> None:
+    from pecli.zoo import metadata_path
+
+    league = tmp_path / "league-with-a-rather-long-run-name-seed-0"
+    shutil.copytree(zoo / "p", league)
+    (league / "exploiter-pursuer").mkdir()
+    for folder in ("pursuer", "exploiter-pursuer"):
+        for suffix in (".zip", metadata_path(Path("x.zip")).suffix):
+            shutil.copy(league / "pursuer" / f"final{suffix}", league / folder / f"round-001{suffix}")
+    result = invoke("zoo", "list", str(tmp_path))
+    assert result.exit_code == 0, result.output
+    rows = [" ".join(line.replace("│", " ").split()) for line in result.output.splitlines() if "round-001" in line]
+    assert len(rows) == 2 and rows[0] != rows[1]
+    assert any("exploiter-pursuer round-001" in row for row in rows)
+    assert max(len(line) for line in result.output.splitlines()) <= 120
+    listed = invoke("config", "list")
+    assert listed.exit_code == 0 and max(len(line) for line in listed.output.splitlines()) <= 120

@@ -23,6 +23,9 @@ PIPE_WIDTH = 200
 """Columns of output where no terminal is attached (``nohup``, cron, CI): Rich would cut it to 80, and a table of
 long run names loses them. ``COLUMNS`` still sets it; a terminal on stdin, stdout or stderr gives its own width."""
 
+TABLE_WIDTH = 120
+"""Columns a table may take at most, whatever the width of the output: wider tables wrap or split."""
+
 
 def _width() -> int | None:
     """``None`` (Rich's own width: the terminal's, or ``COLUMNS``) unless no terminal is attached."""

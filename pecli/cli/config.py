@@ -8,7 +8,7 @@ import typer
 import yaml
 from rich.table import Table
 
-from pecli.cli.common import console, user_errors
+from pecli.cli.common import TABLE_WIDTH, console, user_errors
 from pecli.scenario import builtin_config_dir, builtin_names, load_scenario
 
 app = typer.Typer(help="List, show and check scenario files.", no_args_is_help=True)
@@ -19,8 +19,9 @@ app = typer.Typer(help="List, show and check scenario files.", no_args_is_help=T
 def list_configs() -> None:
     """List the built-in scenarios."""
     table = Table(title=f"built-in scenarios ({builtin_config_dir()})")
-    for column in ("name", "pursuer", "evader", "arena", "T", "description"):
-        table.add_column(column)
+    for column in ("name", "pursuer", "evader", "arena", "T"):
+        table.add_column(column, no_wrap=True, justify="right" if column == "T" else "left")
+    table.add_column("description", ratio=1, overflow="fold")  # the one column that wraps
     for name in builtin_names():
         s = load_scenario(name)
         table.add_row(
@@ -31,7 +32,7 @@ def list_configs() -> None:
             str(s.horizon),
             s.description,
         )
-    console.print(table)
+    console.print(table, width=min(console.width, TABLE_WIDTH))
 
 
 @app.command("show")

@@ -290,9 +290,10 @@ def report(
 
 def _print_report(out: Path) -> None:
     from pecli.experiment.report import ExperimentReport
-    from pecli.reports import results_table
+    from pecli.reports import TABLE_WIDTH, results_tables
 
-    console.print(results_table(ExperimentReport(out).grouped_results()))
+    for table in results_tables(ExperimentReport(out).grouped_results(), min(console.width, TABLE_WIDTH)):
+        console.print(table)
 
 
 @app.command()

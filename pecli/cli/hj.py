@@ -8,19 +8,12 @@ from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
 from pecli.errors import PecliError
 from pecli.io import read_json
+from pecli.progress import WorkProgress
 
 app = typer.Typer(
     help="Hamilton–Jacobi baseline: solve the point-mass game, inspect solutions, print Table II.",
@@ -101,24 +94,13 @@ def solve(
         raise PecliError(f"--out must end in .npz, got '{out.name}'")
     scenario, problem = _problem(config, model, grid, order, steps, backend)
     err_console.print(f"{scenario.name}: {problem.describe()} ({problem.grid.size:,} nodes)", highlight=False)
-    with Progress(
-        TextColumn("[bold]solving"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("steps"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=err_console,
-        transient=True,
-        disable=as_json or not err_console.is_terminal,
-    ) as progress:
-        task = progress.add_task("solve", total=problem.steps)
+    with WorkProgress("solving", problem.steps, err_console, unit="steps", enabled=not as_json) as progress:
         solution, path, reused = solve_cached(
             problem,
             scenario.name,
             out=out,
             force=force,
-            on_step=lambda done, total: progress.update(task, completed=done),
+            on_step=lambda done, total: progress.update(done),
         )
     if as_json:
         typer.echo(json.dumps({**solution.summary(), "path": str(path), "reused": reused}))

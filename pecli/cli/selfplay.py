@@ -15,6 +15,7 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.cli.train import AlgoChoice, BeliefChoice, DeviceOption
+from pecli.progress import LOG_EVERY
 from pecli.scenario import load_scenario
 
 
@@ -147,6 +148,7 @@ def selfplay(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        log_every=None if quiet or err_console.is_terminal else LOG_EVERY,
         device=device,
         cpu_hours=KEEP if cpu_hours is None else cpu_hours,
     )

@@ -8,15 +8,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 
 from pecli.cli.common import (
     console,
@@ -29,6 +20,7 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.errors import PecliError
+from pecli.progress import WorkProgress
 
 
 @user_errors
@@ -86,10 +78,11 @@ def tournament(
     """
     from pecli.locks import locked
     from pecli.reports import (
+        TABLE_WIDTH,
         nash_record,
         nash_table,
         ratings_table,
-        results_table,
+        results_tables,
         write_nash,
         write_reports,
     )
@@ -128,23 +121,15 @@ def tournament(
                 highlight=False,
             )
 
-            with Progress(
-                TextColumn("[bold]pairings"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.fields[last]}"),
-                TimeElapsedColumn(),
-                TimeRemainingColumn(),
-                console=err_console,
-                transient=True,
-                disable=as_json or not err_console.is_terminal,
-            ) as progress:
-                task = progress.add_task("pairings", total=len(pairings), last="")
+            with WorkProgress("pairings", len(pairings), err_console, enabled=not as_json) as progress:
+                done = 0
 
                 def report(result, cached: bool) -> None:
+                    nonlocal done
+                    done += 1
                     note = " (cached)" if cached else ""
-                    last = escape(f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}")
-                    progress.update(task, advance=1, last=last)
+                    last = f"{result.pursuer} vs {result.evader}: {result.capture_rate:.2f}{note}"
+                    progress.update(done, note=last, skipped=1 if cached else 0)
 
                 results = run_tournament(
                     scenario,
@@ -166,11 +151,13 @@ def tournament(
                     data["nash"] = nash_record(results, game)
                 typer.echo(json.dumps(data, indent=2))
                 return
+            width = min(console.width, TABLE_WIDTH)
             if sample is None or len(pairings) == counts["pursuer"] * counts["evader"]:
-                console.print(results_table(results))
-            console.print(ratings_table(results, limit=40))
+                for table in results_tables(results, width):
+                    console.print(table, width=width)
+            console.print(ratings_table(results, limit=40), width=width)
             if game is not None:
-                console.print(nash_table(game, limit=40))
+                console.print(nash_table(game, limit=40), width=width)
                 err_console.print(
                     f"the mixture plays as nash:{out} (each game draws one member by its weight)",
                     highlight=False,

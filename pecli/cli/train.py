@@ -16,6 +16,7 @@ from pecli.cli.common import (
     sigterm_stops,
     user_errors,
 )
+from pecli.progress import LOG_EVERY
 from pecli.scenario import ALGOS, load_scenario
 
 
@@ -121,6 +122,7 @@ def train(
         seed=seed,
         resume=resume,
         progress=not quiet and err_console.is_terminal,
+        log_every=None if quiet or err_console.is_terminal else LOG_EVERY,
         curriculum_steps=curriculum_steps,
         device=device,
     )
@@ -143,8 +145,10 @@ def train(
         )
         raise typer.Exit(code=130) from None
     run_dir = zoo / job.name
+    best = final.with_name("best.zip")
+    also = f" (the best evaluation's: {escape(str(best))})" if best.is_file() else ""
     err_console.print(
-        f"[green]done[/]: {escape(str(final))}\n  checkpoints and their metadata in "
+        f"[green]done[/]: {escape(str(final))}{also}\n  checkpoints and their metadata in "
         f"{escape(str(run_dir / role_name))}/, the run's config and command in {escape(str(run_dir))}/\n"
         f"  learning curves: tensorboard --logdir {escape(str(run_dir / 'tb'))}",
         highlight=False,

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from pecli.cli.common import console, err_console, user_errors
+from pecli.cli.common import TABLE_WIDTH, console, err_console, user_errors
 from pecli.errors import PecliError
 
 if TYPE_CHECKING:
@@ -37,7 +37,11 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
     ratings = tournament_ratings(zoo)
     table = Table(title=f"zoo {zoo}")
     for column in ("run", "role", "checkpoint", "steps", "episodes", "algo", "belief", "scenario", "rating"):
-        table.add_column(column, justify="right" if column in ("steps", "episodes", "rating") else "left")
+        table.add_column(
+            column,
+            justify="right" if column in ("steps", "episodes", "rating") else "left",
+            overflow="fold",  # a long run name wraps instead of losing its end
+        )
     for run in runs:
         for entry in checkpoints_in(run):
             meta = entry.meta
@@ -48,7 +52,7 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
             rating = f"{rated['elo']:.0f} ± {rated['stderr']:.0f}" if rated else ""
             table.add_row(
                 run.name,
-                meta.role,
+                entry.path.parent.name,  # the folder: a league's exploiter-pursuer apart from its main pursuer
                 entry.path.stem,
                 f"{meta.steps:,}",
                 str(meta.episodes),
@@ -57,7 +61,7 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
                 meta.scenario,
                 rating,
             )
-    console.print(table)
+    console.print(table, width=min(console.width, TABLE_WIDTH))
 
 
 @app.command("show")

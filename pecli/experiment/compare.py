@@ -28,6 +28,7 @@ from pecli.rl.handover import STATE_FILE
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import mantel_haenszel_test, two_proportion_z_test
+from pecli.text import cpu_time
 from pecli.tournament import Player, find_players, run_tournament
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
@@ -88,7 +89,7 @@ def main_players(
             chosen = [r for r in done if r == at_round]
         if not chosen:
             where = (
-                f"{max(spent, default=0.0):.2f} of {cpu_hours} CPU-h"
+                cpu_time(3600 * max(spent, default=0.0), 3600 * cpu_hours)
                 if cpu_hours is not None
                 else f"round {max(done, default=0)} of {at_round}"
                 if at_round is not None

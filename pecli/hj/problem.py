@@ -20,6 +20,7 @@ from typing import Literal
 from pecli.errors import ConfigError
 from pecli.hj.grid import DEFAULT_MODEL, DEFAULT_SIZES, MODELS, Grid, Model, make_grid
 from pecli.scenario import PointMassAgent, Scenario
+from pecli.text import article
 
 Order = Literal["maxmin", "minmax"]
 ORDERS: tuple[Order, ...] = ("maxmin", "minmax")
@@ -49,7 +50,7 @@ class PointMassGame:
         if not (isinstance(p, PointMassAgent) and isinstance(e, PointMassAgent)):
             raise ConfigError(
                 f"the Hamilton-Jacobi baseline is for point mass vs point mass; scenario '{scenario.name}' "
-                f"has a {p.kind} pursuer and a {e.kind} evader (try --config point_mass)"
+                f"has {article(p.kind)} pursuer and {article(e.kind)} evader (try --config point_mass)"
             )
         return cls(
             width=scenario.arena.width,

@@ -15,6 +15,7 @@ from pecli.errors import PecliError, PolicyError
 from pecli.policies.windowed import Draws, WindowedPolicy
 from pecli.roles import Role
 from pecli.scenario import Scenario
+from pecli.text import article
 from pecli.zoo import CheckpointMeta, ZooError, read_metadata
 
 
@@ -60,7 +61,7 @@ class LearnedPolicy(WindowedPolicy):
         except ZooError as exc:
             raise PolicyError(str(exc)) from None
         if meta.role != role:
-            raise PolicyError(f"{path} is a {meta.role} checkpoint; it cannot play {role}")
+            raise PolicyError(f"{path} is {article(meta.role)} checkpoint; it cannot play {role}")
         if meta.scenario_hash != scenario.fingerprint():
             raise PolicyError(
                 f"{path} was trained on {_scenario_mismatch(path, meta, scenario)}: pass the config it was trained with"

@@ -21,6 +21,7 @@ from rich.table import Table
 from stable_baselines3.common.callbacks import BaseCallback
 
 from pecli.errors import PecliError
+from pecli.progress import PeriodicLines
 from pecli.scenario import Scenario
 
 
@@ -151,11 +152,20 @@ class EpisodeStats(BaseCallback):
 
 
 class ProgressDisplay(BaseCallback):
-    """A rich progress bar: steps, episodes, recent capture rate, steps/s and ETA."""
+    """A rich progress bar: steps, episodes, recent capture rate, steps/s and ETA; and/or ``lines``, plain
+    progress lines (:class:`pecli.progress.PeriodicLines` over the learner's steps) for a log."""
 
-    def __init__(self, stats: EpisodeStats, total_steps: int, description: str, enabled: bool = True) -> None:
+    def __init__(
+        self,
+        stats: EpisodeStats,
+        total_steps: int,
+        description: str,
+        enabled: bool = True,
+        lines: PeriodicLines | None = None,
+    ) -> None:
         super().__init__()
         self.stats = stats
+        self.lines = lines
         self.total_steps = total_steps
         self.progress = Progress(
             TextColumn("[bold]{task.description}"),
@@ -176,6 +186,8 @@ class ProgressDisplay(BaseCallback):
         self.progress.start()
         self._start_time = time.perf_counter()
         self._start_steps = self.num_timesteps
+        if self.lines is not None:
+            self.lines.start = self.num_timesteps
         self.progress.update(self.task, completed=self.num_timesteps)
 
     def _on_step(self) -> bool:
@@ -183,6 +195,8 @@ class ProgressDisplay(BaseCallback):
         if now - self._last >= 0.5:
             self._last = now
             self._refresh(now)
+            if self.lines is not None:
+                self.lines.update(self.num_timesteps)
         return True
 
     def _refresh(self, now: float) -> None:
@@ -347,9 +361,17 @@ class RoundDisplay(BaseCallback):
     """A rich live view of one side's turn in a self-play round: a progress bar and the opponents
     with their draw weights, episodes and win rates this round."""
 
-    def __init__(self, tracker: PoolTracker, total_steps: int, title: str, enabled: bool = True) -> None:
+    def __init__(
+        self,
+        tracker: PoolTracker,
+        total_steps: int,
+        title: str,
+        enabled: bool = True,
+        lines: PeriodicLines | None = None,
+    ) -> None:
         super().__init__()
         self.tracker = tracker
+        self.lines = lines  # plain progress lines over the turn's steps, for a log
         self.total_steps = total_steps
         self.title = title
         self.enabled = enabled
@@ -392,9 +414,12 @@ class RoundDisplay(BaseCallback):
 
     def _on_step(self) -> bool:
         now = time.perf_counter()
-        if self.live is not None and now - self._last >= 0.25:
+        if now - self._last >= 0.25:
             self._last = now
-            self.live.update(self._render())
+            if self.live is not None:
+                self.live.update(self._render())
+            if self.lines is not None:
+                self.lines.update(self.num_timesteps - self._start)
         return True
 
     def _on_training_end(self) -> None:

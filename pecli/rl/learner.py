@@ -44,6 +44,7 @@ class SelfPlayJob:
     seed: int = 0
     resume: bool = False
     progress: bool = True
+    log_every: float | None = None  # seconds between plain progress lines (a log's, when there is no bar); None: none
     device: str = "cpu"  # where the networks train: cpu, cuda or auto
     cpu_hours: float | None | Literal["keep"] = KEEP  # the run's CPU budget (pecli.rl.budget), None for none, or
     # KEEP: a resumed run's own (none for a new run)

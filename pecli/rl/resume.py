@@ -15,6 +15,7 @@ from typing import Any
 from pecli.errors import PecliError
 from pecli.rl.budget import MAX_CPU_HOURS
 from pecli.scenario import Scenario, dotted, load_scenario
+from pecli.text import article
 from pecli.zoo import JOB_FILE, Run
 
 
@@ -77,7 +78,7 @@ def resume_train(
     scenario = resumed_scenario(run.scenario(), config, run.name)
     kept = run.job()
     if kept is None or kept.get("command") != "train":
-        what = "an older pecli's run (no run.json)" if kept is None else f"a {kept.get('command')} run"
+        what = "an older pecli's run (no run.json)" if kept is None else f"{article(str(kept.get('command')))} run"
         raise PecliError(f"run '{run.name}' is {what}: `pecli train --resume` cannot continue it")
     if any(kept.get(key) is None for key in ("role", "opponent", "seed")):
         raise PecliError(f"{run.path / JOB_FILE}: damaged (a train run records its role, opponent and seed)")

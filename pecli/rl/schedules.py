@@ -20,6 +20,7 @@ from stable_baselines3.common.callbacks import CallbackList
 from pecli.models.buffers import end_episodes
 from pecli.policies.base import Policy
 from pecli.policies.mixed import MixedPolicy
+from pecli.progress import PeriodicLines
 from pecli.rl.callbacks import (
     EpisodeStats,
     FiniteCheck,
@@ -37,6 +38,7 @@ from pecli.rl.train import play_live, resume_seed
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.scenario import SelfPlay as SelfPlaySettings
+from pecli.text import cpu_time
 from pecli.zoo import Run
 from wrappers.simultaneous import SimultaneousGame
 
@@ -70,6 +72,24 @@ class RunLoop(Protocol):
     ) -> None: ...
 
     def save_state(self) -> None: ...
+
+    def report(self, line: str) -> None: ...
+
+
+def turn_lines(loop: RunLoop, label: str, steps: int, turn_cpu: Callable[[], float]) -> PeriodicLines | None:
+    """Plain progress lines of a turn for a log, every ``job.log_every`` seconds (``None`` without): its ``steps``,
+    and the run's CPU time (its finished turns' and ``turn_cpu()``, this turn's so far) out of its budget."""
+    if loop.job.log_every is None:
+        return None
+    budget = None if loop.state.cpu_hours is None else 3600 * loop.state.cpu_hours
+    return PeriodicLines(
+        label,
+        steps,
+        loop.report,
+        unit="steps",
+        every=loop.job.log_every,
+        details=lambda: "run " + cpu_time(loop.state.cpu_seconds() + turn_cpu(), budget),
+    )
 
 
 class Schedule(Protocol):
@@ -155,7 +175,10 @@ class Simultaneous:
         )
         title = f"round {r}/{sp.rounds} · pursuer and evader together (simultaneous)"
         target = int(learners["pursuer"].model.num_timesteps) + max(remaining, 0)
-        display = ProgressDisplay(stats["pursuer"], target, title, enabled=loop.job.progress)
+        lines = turn_lines(
+            loop, title, target, lambda: sum(p["cpu_seconds"] for p in progress.values()) + time.process_time() - cpu
+        )
+        display = ProgressDisplay(stats["pursuer"], target, title, enabled=loop.job.progress, lines=lines)
         callbacks = {
             "pursuer": [FiniteCheck(), *learners["pursuer"].callbacks, stats["pursuer"], display],
             "evader": [FiniteCheck()]
@@ -274,9 +297,9 @@ class Alternating:
             if kind == EXPLOITER
             else f"{role} vs {len(pool.entries)} {other}s ({sp.opponents})"
         )
-        display = RoundDisplay(
-            tracker, sp.steps_per_round, f"round {r}/{sp.rounds} · {what}", enabled=loop.job.progress
-        )
+        title = f"round {r}/{sp.rounds} · {what}"
+        lines = turn_lines(loop, title, sp.steps_per_round, lambda: progress["cpu_seconds"] + time.process_time() - cpu)
+        display = RoundDisplay(tracker, sp.steps_per_round, title, enabled=loop.job.progress, lines=lines)
         try:
             try:
                 if remaining > 0:

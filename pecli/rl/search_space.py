@@ -30,6 +30,7 @@ from pydantic import (
 
 from pecli.errors import PecliError
 from pecli.scenario import ALGOS, Scenario, StrictLoader, Training
+from pecli.text import article
 
 DEFAULT_SPACE = Path(__file__).with_name("search_space.yaml")
 DERIVED = ("net_width", "net_depth")  # make net_arch
@@ -65,9 +66,9 @@ class Parameter(BaseModel):
                 raise ValueError("a categorical parameter takes choices, not low/high/log")
             return self
         if self.choices is not None:
-            raise ValueError(f"a {self.type} parameter takes low and high, not choices")
+            raise ValueError(f"{article(self.type)} parameter takes low and high, not choices")
         if self.low is None or self.high is None or not self.low < self.high:
-            raise ValueError(f"a {self.type} parameter needs low < high")
+            raise ValueError(f"{article(self.type)} parameter needs low < high")
         if self.log and self.low <= 0:
             raise ValueError("a log-scaled parameter needs low > 0")
         if self.type == "int" and not (float(self.low).is_integer() and float(self.high).is_integer()):

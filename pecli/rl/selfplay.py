@@ -54,6 +54,7 @@ from pecli.rl.train import (
 )
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
+from pecli.text import cpu_time, plural
 from pecli.zoo import Run
 
 
@@ -62,12 +63,6 @@ def write_averages(run: Run, state: SelfPlayState, scenario: Scenario) -> None:
     unless it holds them already."""
     for role, inputs in stale_averages(run.path, state.records(), state.curriculum_steps, scenario).items():
         average_checkpoints(inputs, run.path / role / AVERAGE_FILE)
-
-
-def _hours(seconds: float, budget: float) -> str:
-    """CPU seconds as hours: two decimals, or two significant digits under a budget below 0.1 CPU-h (0.0012 of
-    0.002, not 0.00)."""
-    return f"{seconds / 3600:.2f}" if budget >= 0.1 else f"{seconds / 3600:.2g}"
 
 
 class SelfPlay:
@@ -141,16 +136,13 @@ class SelfPlay:
 
     def _budget_line(self) -> str:
         rounds = self.whole_rounds()
-        return (
-            f"budget reached: {_hours(self.state.cpu_seconds(through=rounds), self.state.cpu_hours)} of "
-            f"{self.state.cpu_hours:g} "
-            f"CPU-h after round {rounds}"
-        )
+        spent = cpu_time(self.state.cpu_seconds(through=rounds), 3600 * (self.state.cpu_hours or 0.0))
+        return f"budget reached: {spent} after round {rounds}"
 
     def plan(self) -> str:
         """What the run will do, in one line: rounds, steps, budget, schedule, opponents and belief."""
         sp, state = self.settings, self.state
-        used = f" ({state.cpu_seconds() / 3600:.2f} used)" if state.turns else ""
+        used = f" ({cpu_time(state.cpu_seconds())} used)" if state.turns else ""
         budget = "" if state.cpu_hours is None else f" or {state.cpu_hours:g} CPU-h{used}, whichever comes first,"
         opponents = f", opponents {sp.opponents}" if sp.schedule == "alternating" else ""
         return (
@@ -235,12 +227,15 @@ class SelfPlay:
         for turn in (t for t in self.state.turns if t.round == r):
             role = turn.role
             rate = turn.capture_rate if role == "pursuer" else 1 - turn.capture_rate
-            what = ("captures" if role == "pursuer" else "escapes") + (f" {rate:.2f}" if turn.episodes else " -")
+            what = f"{'captures' if role == 'pursuer' else 'escapes'} {rate:.2f}"
             if turn.learner == MAIN and not turn.episodes:
                 parts.append(f"{role}: no episode finished vs {turn.opponents} {opponent_of(role)}s")
             elif turn.learner == MAIN:
-                parts.append(f"{role} {what} in {turn.episodes} episodes vs {turn.opponents} {opponent_of(role)}s")
+                parts.append(
+                    f"{role} {what} in {plural(turn.episodes, 'episode')} vs {turn.opponents} {opponent_of(role)}s"
+                )
             else:
+                what = what if turn.episodes else "finished no episode"
                 tried = "" if turn.join_rate is None else f", {turn.join_rate:.2f} in its join games"
                 by_timeout = turn.joined_by == "timeout" or (  # a record older than joined_by: as it would be now
                     not turn.joined_by and rate < self.settings.exploiter_join
@@ -250,9 +245,15 @@ class SelfPlay:
                     + (" and joins the pool" + (" (its timeout)" if by_timeout else "") if turn.joined else "")
                 )
         cpu = sum(t.cpu_seconds for t in self.state.turns if t.round == r)
-        used = (
-            ""
-            if self.state.cpu_hours is None
-            else f"; {_hours(self.state.cpu_seconds(), self.state.cpu_hours)} of {self.state.cpu_hours:g} CPU-h"
-        )
-        return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu:.0f} CPU-s{used})"
+        return f"round {r}/{self.settings.rounds}: " + "; ".join(parts) + f" ({cpu_time(cpu)}{self._spent(r)})"
+
+    def _spent(self, r: int) -> str:
+        """What the run has spent after round ``r`` (of its budget, if it has one) and about how much more CPU time
+        it needs: the rounds left at the mean cost of a round so far, at most what is left of the budget."""
+        spent = self.state.cpu_seconds()
+        budget = None if self.state.cpu_hours is None else 3600 * self.state.cpu_hours
+        left = spent / max(r, 1) * (self.settings.rounds - r)
+        if budget is not None:
+            left = min(left, budget - spent)
+        estimate = f", about {cpu_time(left)} left" if left > 0 else ""
+        return f"; run {cpu_time(spent, budget)}{estimate}"

@@ -34,6 +34,7 @@ from pecli.models.extractors import BeliefExtractor
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.learned import LearnedPolicy
+from pecli.progress import PeriodicLines
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import (
     CpuBudget,
@@ -47,6 +48,7 @@ from pecli.rl.callbacks import (
 from pecli.rl.durable import DurableState
 from pecli.roles import DEFAULT_OPPONENT, Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
+from pecli.text import cpu_time
 from pecli.zoo import BEST, FINAL, LAST, RESUME_DIR, CheckpointMeta, Run, safe_run_name
 from wrappers.frozen_opponent import FrozenOpponentVecEnv
 
@@ -121,6 +123,7 @@ class TrainJob:
     seed: int = 0
     resume: bool = False
     progress: bool = True
+    log_every: float | None = None  # seconds between plain progress lines (a log's, when there is no bar); None: none
     curriculum_steps: int | None = None
     device: str = "cpu"  # where the networks train: cpu, cuda or auto (checkpoints always load on the CPU)
     cpu_budget: float | None = None  # CPU seconds of the run (all its processes) at which it stops, steps or not
@@ -338,10 +341,20 @@ def train(
     stats.listeners.append(
         every_episodes(every, episodes, lambda total: commit(total, Run.episode_name(total // every * every)))
     )
+    lines = None
+    if job.log_every is not None:
+        lines = PeriodicLines(
+            job.name,
+            t.steps,
+            report,
+            unit="steps",
+            every=job.log_every,
+            details=lambda: cpu_time(cpu_seconds(), job.cpu_budget),
+        )
     callbacks = [
         FiniteCheck(),
         stats,
-        ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress),
+        ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress, lines=lines),
     ]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
@@ -361,10 +374,8 @@ def train(
             run.save(model, job.role, BEST, meta)
 
         def reported(steps: int, cpu: float, rate: float) -> None:
-            digits = 1 if (job.cpu_budget or cpu) >= 300 else 2
-            budget = f" of {job.cpu_budget / 60:.{digits}f}" if job.cpu_budget else ""
             report(
-                f"{job.name}: {steps:,} steps, {cpu / 60:.{digits}f}{budget} CPU-min, capture rate vs "
+                f"{job.name}: {steps:,} steps, {cpu_time(cpu, job.cpu_budget)}, capture rate vs "
                 f"{eval_opponent} {rate:.2f}"
             )
 

@@ -9,7 +9,10 @@ import pytest
 
 from pecli.experiment import load_experiment
 from pecli.experiment.runs import SELFPLAY_STATE, run_progress
+from pecli.records import Turn
 from pecli.rl.budget import budget_reached, cpu_through, scheduled_turns, whole_rounds
+from pecli.rl.pool import OpponentPool
+from pecli.rl.state import SelfPlayState
 
 LEAGUE = load_experiment("strength-small").runs()[0]  # no exploiters, 150 rounds planned
 EXPLOITERS = LEAGUE.scenario.training.selfplay.model_copy(  # an evader exploiter every round once 1 CPU-h is spent
@@ -19,6 +22,26 @@ EXPLOITERS = LEAGUE.scenario.training.selfplay.model_copy(  # an evader exploite
 
 def turn(round: int, role: str, cpu: float, learner: str = "main") -> dict:
     return {"round": round, "role": role, "cpu_seconds": cpu, "learner": learner}
+
+
+def state_record(turns: list[dict]) -> dict:
+    """A valid ``selfplay.json`` holding ``turns`` (their other fields made up)."""
+    full = [
+        Turn(
+            round=t["round"],
+            role=t["role"],
+            steps=0,
+            episodes=0,
+            captures=0,
+            cpu_seconds=float(t["cpu_seconds"]),
+            checkpoint=f"{'exploiter-' * (t['learner'] == 'exploiter')}{t['role']}/round-{t['round']:03d}.zip",
+            opponents=1,
+            learner=t["learner"],
+        )
+        for t in turns
+    ]
+    pools = {role: OpponentPool(role) for role in ("pursuer", "evader")}
+    return SelfPlayState(seed=0, curriculum_steps=0, pools=pools, turns=full).to_dict()
 
 
 WHOLE = [turn(1, "pursuer", 1000), turn(1, "evader", 1000), turn(2, "pursuer", 1000), turn(2, "evader", 1000)]
@@ -42,7 +65,7 @@ def test_only_whole_rounds_count(turns: list[dict], rounds: int, spent: float, r
     assert budget_reached(turns, 1.0, settings) is reached and not budget_reached(turns, None, settings)
     run = LEAGUE.model_copy(update={"cpu_hours": 1.0})  # the experiment's status decides alike
     (tmp_path / run.name).mkdir()
-    (tmp_path / run.name / SELFPLAY_STATE).write_text(json.dumps({"turns": turns}))
+    (tmp_path / run.name / SELFPLAY_STATE).write_text(json.dumps(state_record(turns)))
     progress = run_progress(run, tmp_path)
     assert progress.done is reached and progress.round == rounds
 

@@ -3,7 +3,7 @@
     python benchmarks/bench_belief_capture.py capture   # (c) the curve runs' checkpoints vs greedy and rash
     python benchmarks/bench_belief_capture.py selfplay  # (d) self-play runs with and without a belief, cross-played
 
-(c) reads the curve runs of ``bench_train.py curves --belief KIND`` and, for each, takes the
+(c) reads the curve runs of ``bench_train_curves.py curves --belief KIND`` and, for each, takes the
 newest checkpoint the run had written within ``--minutes`` of CPU time (the run's evaluation log
 maps CPU time to steps), then plays it against the greedy and rash evaders (500 episodes, seed 0).
 With ``--shuffled`` it plays each belief checkpoint once more with its belief features permuted

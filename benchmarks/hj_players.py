@@ -1,4 +1,4 @@
-"""The players the Hamilton–Jacobi benchmarks share (``bench_hj.py``, ``bench_hj_ablations.py``).
+"""The players the Hamilton–Jacobi benchmarks share (``bench_hj_matrix.py``, ``bench_hj_ablations.py``).
 
 "chase" is the rule the first HJ players fell back on: full acceleration along the sign of ∂V/∂r of the
 default rel4d value, per axis (a lead pursuit towards the closest approach, or a flight from it).

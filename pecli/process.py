@@ -1,11 +1,14 @@
-"""What a long job does with its own process: torch on one thread, and SIGTERM that stops like Ctrl-C."""
+"""What a long job does with its own process: torch on one thread, and SIGTERM that stops like Ctrl-C; and
+what a supervisor reads of other processes (their children and CPU time, from ``/proc``)."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import NoReturn
 
 
@@ -34,3 +37,31 @@ def sigterm_stops() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def live_parents() -> dict[int, int]:
+    """PID -> parent PID of every live (not zombie) process, from ``/proc`` (Linux; empty elsewhere)."""
+    found: dict[int, int] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):  # the process ended while being read
+            continue
+        if fields and fields[0] != "Z":
+            found[int(stat.parent.name)] = int(fields[1])
+    return found
+
+
+def descendants(pid: int) -> set[int]:
+    """The PIDs of every live process below ``pid``: its children, theirs, and so on (Linux)."""
+    parents, found, frontier = live_parents(), set[int](), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def cpu_seconds(pid: int) -> float:
+    """CPU time (user + system, s) a running process has used so far, from ``/proc`` (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

@@ -601,3 +601,32 @@ def run_tournament(
             episodes=episodes,
             seeds=list(seeds),
         )
+
+
+def player_spec(policy: str | Path) -> str:
+    """How a tournament names a player's ``spec``: a checkpoint (``.zip``) by its resolved path, anything else as
+    given (a policy string such as ``greedy`` or ``hj:model=rel4d``)."""
+    return str(Path(policy).resolve()) if str(policy).endswith(".zip") else str(policy)
+
+
+def pairing_results(
+    scenario: Scenario,
+    pursuers: Sequence[str | Path],
+    evaders: Sequence[str | Path],
+    episodes: int,
+    seeds: Sequence[int],
+    out: Path,
+    workers: int = 1,
+    on_result: Callable[[PairingResult, bool], None] | None = None,
+) -> dict[tuple[str, str], PairingResult]:
+    """Every pursuer against every evader, each given as a checkpoint path or a policy string.
+
+    The games are a :func:`run_tournament` cached in ``out`` (a second call plays only new pairings).
+    Returns each pairing's result keyed by ``(player_spec(pursuer), player_spec(evader))``.
+    """
+    found = find_players([str(p) for p in [*pursuers, *evaders]], scenario, baselines=True).players
+    wanted = {"pursuer": {player_spec(p) for p in pursuers}, "evader": {player_spec(e) for e in evaders}}
+    players: dict[Role, list[Player]] = {role: [p for p in found[role] if p.spec in wanted[role]] for role in found}
+    pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
+    grid = run_tournament(scenario, players, pairings, episodes, seeds, out, workers, on_result).grid()
+    return {(p.spec, e.spec): grid[(p.name, e.name)] for p, e in pairings}

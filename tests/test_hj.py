@@ -16,7 +16,7 @@ from pecli.errors import ConfigError, PolicyError
 from pecli.game import Game
 from pecli.hj import Problem, Solution, SolutionError, cache_path, solve, solve_cached
 from pecli.hj.filters import window_extreme
-from pecli.hj.oracle import continuous_value, discrete_value
+from pecli.hj.oracle import continuous_value, discrete_value, solution_accuracy
 from pecli.hj.solver import solve_with_capture_steps
 from pecli.match import play_match
 from pecli.policies import resolve_policy
@@ -89,6 +89,10 @@ def test_the_solver_agrees_with_the_closed_form(point_mass: Scenario) -> None:
     assert np.mean(dp[exact <= 0] <= 0) >= 0.85  # recall of the capture set
     assert np.mean(dp[exact > 0] <= 0) <= 0.01  # false captures
     assert 0.02 < np.mean(exact <= 0) < 0.2  # the sample holds captures and escapes
+    accuracy = solution_accuracy(problem, values)  # the same states: what `bench_hj.py solve` reports
+    assert accuracy["sign_discrete"] == np.mean((dp <= 0) == (exact <= 0))
+    assert accuracy["error_discrete"] == pytest.approx(np.mean(np.abs(dp - exact)))
+    assert accuracy["sign_continuous"] >= 0.95 and accuracy["error_continuous"] >= accuracy["error_discrete"] - 0.05
 
 
 @pytest.mark.parametrize("model", ["rel4d", "abs8d"])

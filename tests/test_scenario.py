@@ -125,6 +125,17 @@ def test_fingerprint_tracks_the_game_not_the_name(paper) -> None:
     assert slower.fingerprint() != paper.fingerprint()
 
 
+def test_with_sensor_range_widens_the_chosen_sensors(paper) -> None:
+    seeing = paper.with_sensor_range(30.0, ("evader",))
+    assert seeing.evader.sensor.range == 30.0 and seeing.evader.sensor.fov == paper.evader.sensor.fov
+    assert seeing.pursuer == paper.pursuer and paper.evader.sensor.range != 30.0
+    both = paper.with_sensor_range(30.0)
+    assert both.pursuer.sensor.range == both.evader.sensor.range == 30.0
+    assert both.fingerprint() != paper.fingerprint()
+    with pytest.raises(ValueError, match="sensor range"):
+        paper.with_sensor_range(0.0)
+
+
 # -- strict configs: finite numbers, no duplicate keys, no bool/number mix-ups, plausible sizes ----------
 
 

@@ -10,8 +10,9 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 from pecli.errors import PecliError
+from pecli.process import descendants, live_parents
 from pecli.scenario import Scenario
-from pecli.tournament import Player, find_players, run_tournament, schedule
+from pecli.tournament import Player, find_players, pairing_results, player_spec, run_tournament, schedule
 
 runner = CliRunner()
 
@@ -24,6 +25,19 @@ def test_baselines_are_found_by_role(quick: Scenario) -> None:
     players = baselines(quick)
     assert [p.name for p in players["pursuer"]] == ["pure-pursuit"]
     assert [p.name for p in players["evader"]] == ["random-walk", "greedy", "rash"]
+
+
+def test_pairing_results_by_spec_cached(quick: Scenario, tmp_path: Path) -> None:
+    first = pairing_results(quick, ["pure-pursuit"], ["greedy", "rash"], 4, [0], tmp_path / "t")
+    assert set(first) == {("pure-pursuit", "greedy"), ("pure-pursuit", "rash")}
+    assert all(r.episodes == 4 and r.pursuer == "pure-pursuit" for r in first.values())
+    cached: list[bool] = []
+    again = pairing_results(
+        quick, ["pure-pursuit"], ["greedy"], 4, [0], tmp_path / "t", on_result=lambda r, c: cached.append(c)
+    )
+    assert cached == [True] and again[("pure-pursuit", "greedy")] == first[("pure-pursuit", "greedy")]
+    assert player_spec("runs/a/pursuer/final.zip") == str(Path("runs/a/pursuer/final.zip").resolve())
+    assert player_spec("hj:model=rel4d") == "hj:model=rel4d"
 
 
 def test_full_grid_and_sampled_pairings() -> None:
@@ -163,27 +177,6 @@ def test_sampling_without_checkpoints_is_refused(quick: Scenario) -> None:
 
 
 # -- process hygiene: a killed tournament leaves no worker behind; one writer per --out --------------------
-def _parents() -> dict[int, int]:
-    """PID -> parent PID of every live (not zombie) process, from /proc."""
-    found = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if fields[0] != "Z":
-            found[int(stat.parent.name)] = int(fields[1])
-    return found
-
-
-def _descendants(pid: int) -> set[int]:
-    parents, found, frontier = _parents(), set(), {pid}
-    while frontier:
-        frontier = {child for child, parent in parents.items() if parent in frontier} - found
-        found |= frontier
-    return found
-
-
 def _wait_for(condition, seconds: float, what: str) -> None:
     import time
 
@@ -228,11 +221,11 @@ def test_a_killed_tournament_leaves_no_worker_behind(tmp_path: Path, signal_name
     try:
         _wait_for(lambda: driver.poll() is not None or any((out / "pairings").glob("*.json")), 180, "a cached pairing")
         assert driver.poll() is None, driver.communicate()
-        children = _descendants(driver.pid)
+        children = descendants(driver.pid)
         assert len(children) >= 2  # the workers (and multiprocessing's resource tracker)
         driver.send_signal(getattr(signal, signal_name))
         driver.wait(timeout=60)
-        _wait_for(lambda: not children & set(_parents()), 20, f"the driver's children {children} to end")
+        _wait_for(lambda: not children & set(live_parents()), 20, f"the driver's children {children} to end")
         if signal_name == "SIGTERM":  # ends as Ctrl-C does
             stderr = driver.stderr.read()  # the workers, which shared the pipe, are gone: no wait
             assert driver.returncode == 130 and "interrupted" in stderr and "Traceback" not in stderr, stderr

@@ -149,6 +149,19 @@ class Scenario(_Model):
             return self.evader
         raise ValueError(f"role must be 'pursuer' or 'evader', not {role!r}")
 
+    def with_sensor_range(self, range_m: float, roles: tuple[str, ...] = ("pursuer", "evader")) -> Scenario:
+        """This scenario with the sensors of ``roles`` reaching ``range_m`` metres (fields of view kept).
+
+        A range beyond the arena's diagonal makes the opponent seen everywhere: full observation.
+        """
+        if not 0.0 < range_m <= MAX_METRES:
+            raise ValueError(f"a sensor range must be in (0, {MAX_METRES:g}] m, got {range_m!r}")
+        update = {}
+        for role in roles:
+            agent = self.agent(role)
+            update[role] = agent.model_copy(update={"sensor": agent.sensor.model_copy(update={"range": range_m})})
+        return self.model_copy(update=update)
+
     def fingerprint(self) -> str:
         """A short hash of everything that changes the game (not the name, description or training)."""
         payload = self.model_dump(exclude={"name", "description", "training"}, mode="json")

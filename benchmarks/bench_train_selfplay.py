@@ -1,0 +1,127 @@
+"""Self-play of two configs to a CPU cap, then their final players against each other.
+
+    python benchmarks/bench_train_selfplay.py selfplay --configs tuned paper --minutes 10
+
+``selfplay`` runs ``pecli selfplay`` for each config of ``--configs`` (default: tuned and paper) and each seed
+until it has used ``--minutes`` of CPU time (or finished its rounds), stopping it with SIGTERM (finished turns
+are kept; ``--resume`` continues them to the same cap), then plays each pair of configs' final
+checkpoints against each other, ``--episodes`` games: the first config's pursuer against the second's
+evader and vice versa.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # the runs inherit it
+
+from pecli.process import cpu_seconds  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SELFPLAY = Path(os.environ.get("PECLI_BENCH_SELFPLAY", ROOT / "runs" / "bench_train_selfplay"))
+
+
+def _turns(run: Path) -> list[dict]:
+    state = run / "selfplay.json"
+    return json.loads(state.read_text())["turns"] if state.is_file() else []
+
+
+def _done(run: Path, minutes: float) -> bool:
+    """Whether ``run`` played all its rounds, or was stopped at a cap of ``minutes`` or more (its ``done`` file)."""
+    marker = run / "done"
+    if not marker.is_file():
+        return False
+    text = marker.read_text().strip()
+    try:
+        return float(text) >= minutes
+    except ValueError:  # "all rounds" (or an empty marker of an older benchmark)
+        return True
+
+
+def selfplay(args: argparse.Namespace) -> None:
+    """Self-play per config and seed to a CPU cap, then the configs' final players against each other."""
+    SELFPLAY.mkdir(parents=True, exist_ok=True)
+    for seed in args.seeds:
+        for config in args.configs:
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
+            before = sum(t["cpu_seconds"] for t in _turns(run))  # earlier processes' finished turns
+            if before >= 60 * args.minutes or _done(run, args.minutes):
+                continue
+            command = [sys.executable, "-m", "pecli", "selfplay", "--zoo", str(SELFPLAY), "--name", run.name, "-q"]
+            command += ["--resume"] if (run / "selfplay.json").exists() else ["-c", config, "--seed", str(seed)]
+            print("started:", " ".join(command[1:]), flush=True)
+            process = subprocess.Popen(command, cwd=ROOT)
+            capped = False
+            while process.poll() is None:
+                time.sleep(5)
+                if process.poll() is None and before + cpu_seconds(process.pid) >= 60 * args.minutes:
+                    process.send_signal(signal.SIGTERM)  # keeps the finished turns
+                    process.wait()
+                    capped = True
+            if process.returncode == 0 or capped:
+                # played all its rounds, or reached the cap (its finished turns may sum to a little less:
+                # a later call with the same cap must not resume it, or it would train past it bit by bit)
+                (run / "done").write_text("all rounds\n" if process.returncode == 0 else f"{args.minutes}\n")
+            used = sum(t["cpu_seconds"] for t in _turns(run))
+            print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
+    print(
+        f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
+        f"{args.configs[0]} evader | rounds |"
+    )
+    print("| ---: | ---: | ---: | --- |")
+    for seed in args.seeds:
+        final = {}
+        for config in args.configs[:2]:
+            run = SELFPLAY / f"{Path(config).stem}-s{seed}"
+            final[config] = {t["role"]: run / t["checkpoint"] for t in _turns(run)}
+        if any(set(f) != {"pursuer", "evader"} for f in final.values()):
+            print(f"| {seed} | - | - | a run has no finished round yet |")
+            continue
+        a, b = args.configs[:2]
+        rates = [
+            _capture_rate(final[x]["pursuer"], final[y]["evader"], args.episodes, seed) for x, y in ((a, b), (b, a))
+        ]
+        rounds = " / ".join(str(len(_turns(SELFPLAY / f"{Path(c).stem}-s{seed}")) // 2) for c in (a, b))
+        print(f"| {seed} | {rates[0]:.3f} | {rates[1]:.3f} | {rounds} |", flush=True)
+
+
+def _capture_rate(pursuer: Path, evader: Path, episodes: int, seed: int) -> float:
+    command = [
+        sys.executable,
+        "-m",
+        "pecli",
+        "play",
+        "--pursuer",
+        str(pursuer),
+        "--evader",
+        str(evader),
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(10_000 + seed),
+        "--json",
+    ]
+    output = subprocess.run(command, cwd=ROOT, check=True, capture_output=True, text=True).stdout
+    return float(json.loads(output)["capture_rate"])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="step", required=True)
+    p = sub.add_parser("selfplay")
+    p.add_argument("--configs", nargs=2, default=["tuned", "paper"])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--minutes", type=float, default=10.0, help="CPU minutes per self-play run")
+    p.add_argument("--episodes", type=int, default=500)
+    selfplay(parser.parse_args())
+
+
+if __name__ == "__main__":
+    main()

@@ -578,6 +578,63 @@ def cached_pairings(out: Path) -> int:
     )
 
 
+def test_a_stop_cancels_no_finished_task_on_ray(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C or SIGTERM mid-tournament closes the pairings' generator: the tasks still out end with Ray's
+    shutdown, none is cancelled (``ray.cancel`` racing a task's completion aborts the driver inside Ray, exit 1
+    instead of 130, Ray's agents left behind); stopping runs cancels the unfinished ones only."""
+    from types import SimpleNamespace
+
+    import ray
+
+    from pecli.experiment import ray_executor
+    from pecli.experiment.ray_executor import RayCluster
+
+    cancelled: list[str] = []
+    monkeypatch.setattr(ray_executor, "_pairing_task", SimpleNamespace(remote=lambda job: job))  # a ref is its job
+    monkeypatch.setattr(ray, "wait", lambda refs, num_returns=1, timeout=None: (refs[:num_returns], refs[num_returns:]))
+    monkeypatch.setattr(ray, "get", lambda ref: f"played {ref}")
+    monkeypatch.setattr(ray, "cancel", lambda ref, force=False: cancelled.append(ref))
+    pairings = RayCluster().play_pairings(["j0", "j1", "j2"])  # type: ignore[list-item]
+    assert next(pairings) == (0, "played j0")
+    pairings.close()  # as run_tournament does when interrupted
+    assert cancelled == []
+
+    def finished(refs: list[str], num_returns: int, timeout: float) -> tuple[list[str], list[str]]:
+        return [r for r in refs if r.startswith("done")], [r for r in refs if not r.startswith("done")]
+
+    monkeypatch.setattr(ray, "wait", finished)
+    RayCluster.stop(["done-a", "running-b"], grace=0)  # type: ignore[list-item]
+    assert cancelled == ["running-b"]
+
+
+def test_sigterm_while_ray_starts_stops_like_ctrl_c(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ray.init puts its own SIGTERM handler (exit code 15) in place of the caller's: the caller's gets a SIGTERM
+    that comes while Ray starts, and is back once it has started."""
+    import ray
+
+    from pecli.experiment.ray_executor import WORKER_NICENESS, RayCluster
+    from pecli.process import interrupt, sigterm_stops
+
+    def init(signalled: bool, **options: object) -> None:
+        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(signum))  # as ray.init does
+        if signalled:
+            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)  # type: ignore[operator]
+
+    shutdowns: list[bool] = []
+    monkeypatch.setenv(WORKER_NICENESS, "0")
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "shutdown", lambda: shutdowns.append(True))
+    with sigterm_stops():
+        monkeypatch.setattr(ray, "init", lambda **options: init(False, **options))
+        with RayCluster(cpus=1):
+            assert signal.getsignal(signal.SIGTERM) is interrupt
+        monkeypatch.setattr(ray, "init", lambda **options: init(True, **options))
+        with pytest.raises(KeyboardInterrupt), RayCluster(cpus=1):
+            pass
+        assert signal.getsignal(signal.SIGTERM) is interrupt
+    assert shutdowns == [True, True]  # what Ray had started is stopped either way
+
+
 def test_smoke_end_to_end_on_embedded_ray(tmp_path: Path) -> None:
     from pecli.experiment import RayCluster
 

@@ -3,7 +3,6 @@ experiment file, executed on Ray."""
 
 from __future__ import annotations
 
-import signal
 import socket
 from contextlib import ExitStack
 from pathlib import Path
@@ -17,7 +16,6 @@ from pecli.cli.common import (
     PlayersConfigOption,
     console,
     err_console,
-    interrupt,
     scenario_for,
     sigterm_stops,
     user_errors,
@@ -185,7 +183,6 @@ def run(
         if live is not None:
             live.start()
         with cluster:
-            signal.signal(signal.SIGTERM, interrupt)  # again: ray.init installed a handler of its own
             where = (
                 f"embedded Ray, {cluster.total_cpus()} CPUs"
                 if cluster.embedded

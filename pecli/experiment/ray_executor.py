@@ -19,6 +19,7 @@ import logging
 import os
 import signal
 import socket
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -83,6 +84,12 @@ def task_error(exc: BaseException) -> BaseException:
     return cause if isinstance(cause, BaseException) else exc
 
 
+def _restore_sigterm(handler: Any) -> None:
+    """Put back a SIGTERM handler of the caller's in place of Ray's (from the main thread, where Ray sets its own)."""
+    if callable(handler) and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, handler)
+
+
 class RayCluster:
     """A connection to Ray for one experiment: embedded with ``cpus`` (default: all cores) or joined at
     ``address``; a context manager that stops an embedded Ray (and disconnects from a joined one)."""
@@ -110,12 +117,23 @@ class RayCluster:
         notices = logging.getLogger(TOKEN_LOGGER)
         if _not_the_token_notice not in notices.filters:
             notices.addFilter(_not_the_token_notice)
+        # ray.init puts a SIGTERM handler of its own (exit code 15) in place of the caller's: the caller's comes back
+        previous = signal.getsignal(signal.SIGTERM)
         try:
             # "local" starts a new Ray even where `ray start` left a cluster's address behind (None would join it)
             ray.init(address=self.address or "local", **options)
+        except SystemExit as exc:  # SIGTERM while Ray starts: the caller's handler gets it, as it would any other time
+            if exc.code != signal.SIGTERM or not callable(previous):
+                raise
+            _restore_sigterm(previous)
+            ray.shutdown()  # what ray.init had started
+            previous(signal.SIGTERM, None)
+            raise
         except (ConnectionError, RayError, ValueError, RuntimeError) as exc:
             where = f"the Ray cluster at {self.address}" if self.address else "an embedded Ray"
             raise PecliError(f"cannot start or join {where}: {str(exc).splitlines()[0] if str(exc) else exc}") from None
+        finally:
+            _restore_sigterm(previous)
         self._connected_here = True
         return self
 
@@ -156,38 +174,44 @@ class RayCluster:
 
     @staticmethod
     def stop(refs: Sequence[ray.ObjectRef], grace: float) -> None:
-        """Interrupt running tasks like Ctrl-C (a run commits its state of the moment), then wait at most
-        ``grace`` seconds for them to end."""
-        for ref in refs:
+        """Interrupt the tasks not finished yet like Ctrl-C (a run commits its state of the moment), then wait
+        at most ``grace`` seconds for them to end. A finished task is left alone: ``ray.cancel`` racing a task's
+        completion can abort the driver inside Ray."""
+        if not refs:
+            return
+        _, running = ray.wait(list(refs), num_returns=len(refs), timeout=0)
+        for ref in running:
             try:
                 ray.cancel(ref)
             except RayError:
                 pass
-        if refs:
-            ray.wait(list(refs), num_returns=len(refs), timeout=grace)
+        if running:
+            ray.wait(running, num_returns=len(running), timeout=grace)
 
     # -- tournament pairings ------------------------------------------------------------------------
     def play_pairings(self, jobs: Sequence[PairingJob]) -> Iterator[tuple[int, PairingResult | PecliError]]:
-        """A :data:`pecli.tournament.PairingExecutor`: every job a Ray task, results as they finish."""
+        """A :data:`pecli.tournament.PairingExecutor`: every job a Ray task, results as they finish.
+
+        Stopped early (Ctrl-C, SIGTERM, an error), it leaves the tasks still out to end with the driver's
+        connection to Ray (leaving the :class:`RayCluster` block ends them): ``ray.cancel`` on a pairing that
+        finishes at that moment can abort the driver inside Ray (a race in Ray's task manager), and pairings
+        finish many times a second.
+        """
         refs = {_pairing_task.remote(job): index for index, job in enumerate(jobs)}
         pending = list(refs)
-        try:
-            while pending:
-                ready, pending = ray.wait(pending, num_returns=1)
-                for ref in ready:
-                    try:
-                        yield refs[ref], self.result(ref)
-                    except PecliError as exc:
-                        yield refs[ref], exc
-                    except Exception as exc:  # a worker lost for good, a MemoryError in the task: that pairing fails
-                        yield (
-                            refs[ref],
-                            PecliError(
-                                f"a pairing failed on Ray ({type(exc).__name__}: "
-                                f"{str(exc).splitlines()[0] if str(exc) else exc}); Ray's logs are "
-                                "in /tmp/ray/session_latest/logs/"
-                            ),
-                        )
-        finally:
-            for ref in pending:  # stopped early (Ctrl-C, an error): drop what is still queued
-                ray.cancel(ref, force=True)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                try:
+                    yield refs[ref], self.result(ref)
+                except PecliError as exc:
+                    yield refs[ref], exc
+                except Exception as exc:  # a worker lost for good, a MemoryError in the task: that pairing fails
+                    yield (
+                        refs[ref],
+                        PecliError(
+                            f"a pairing failed on Ray ({type(exc).__name__}: "
+                            f"{str(exc).splitlines()[0] if str(exc) else exc}); Ray's logs are "
+                            "in /tmp/ray/session_latest/logs/"
+                        ),
+                    )

@@ -124,9 +124,10 @@ def run_demo(
 
     report("4/4 drawing")
     out.mkdir(parents=True, exist_ok=True)
+    title = f"the trained pursuer vs greedy on quick (seed {seed})"
     pictures = [
-        animate_episode(recordings["greedy"], out / "demo.gif"),
-        draw_episodes(recordings["greedy"], out / "demo.png", episodes=8),
+        animate_episode(recordings["greedy"], out / "demo.gif", title=title),
+        draw_episodes(recordings["greedy"], out / "demo.png", episodes=8, title=title),
     ]
     return DemoResult(
         checkpoint=checkpoint,

@@ -100,7 +100,7 @@ def run_demo(
                 resolve_policy(evader, "evader", scenario),
                 episodes=episodes,
                 seed=seed,
-                record=8 if (pursuer != BASELINE and evader == "greedy") else 0,
+                record=min(8, episodes) if (pursuer != BASELINE and evader == "greedy") else 0,
             )
             rates.append(result.capture_rate)
             if recording is not None:
@@ -127,7 +127,7 @@ def run_demo(
     title = f"the trained pursuer vs greedy on quick (seed {seed})"
     pictures = [
         animate_episode(recordings["greedy"], out / "demo.gif", title=title),
-        draw_episodes(recordings["greedy"], out / "demo.png", episodes=8, title=title),
+        draw_episodes(recordings["greedy"], out / "demo.png", episodes=min(8, episodes), title=title),
     ]
     return DemoResult(
         checkpoint=checkpoint,

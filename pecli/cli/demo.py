@@ -29,16 +29,21 @@ def demo(
     drawn as a GIF and eight as a PNG. Replaces an earlier demo in [bold]--out[/].
     """
     from pecli.demo import BASELINE, run_demo
+    from pecli.rl.train import TrainingInterrupted
 
-    with sigterm_stops():
-        result = run_demo(
-            out,
-            cpu_minutes=cpu_minutes,
-            episodes=episodes,
-            seed=seed,
-            progress=err_console.is_terminal,
-            report=lambda line: err_console.print(line, markup=False, highlight=False),
-        )
+    try:
+        with sigterm_stops():
+            result = run_demo(
+                out,
+                cpu_minutes=cpu_minutes,
+                episodes=episodes,
+                seed=seed,
+                progress=err_console.is_terminal,
+                report=lambda line: err_console.print(line, markup=False, highlight=False),
+            )
+    except (TrainingInterrupted, KeyboardInterrupt):
+        err_console.print("[yellow]interrupted[/]: the demo starts again from scratch when run again", highlight=False)
+        raise typer.Exit(code=130) from None
     table = Table(title=f"capture rate over {episodes} games, the same start states in each row")
     table.add_column("evader")
     table.add_column(f"trained pursuer ({result.cpu_seconds / 60:.1f} CPU-min)", justify="right")

@@ -62,3 +62,19 @@ def test_step_after_the_end_is_refused() -> None:
     env.agents = []
     with pytest.raises(RuntimeError, match="reset"):
         env.step({"pursuer": np.zeros(2), "evader": np.zeros(2)})
+
+
+def test_reset_infos_have_the_keys_and_types_of_step_infos() -> None:
+    env = parallel_env("paper")
+    _, reset_infos = env.reset(seed=0)
+    _, _, _, _, step_infos = env.step({agent: env.action_space(agent).sample() for agent in env.agents})
+    for agent in env.possible_agents:
+        assert {k: type(v) for k, v in reset_infos[agent].items()} == {k: type(v) for k, v in step_infos[agent].items()}
+    assert reset_infos["pursuer"]["captured"] is False
+    assert reset_infos["pursuer"]["distance"] == reset_infos["evader"]["distance"] > 0.0
+
+
+def test_render_accepts_a_mode() -> None:
+    env = parallel_env("quick")
+    env.reset(seed=0)
+    assert env.render() is None and env.render("human") is None

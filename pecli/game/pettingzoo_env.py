@@ -11,12 +11,17 @@ full state scaled to [-1, 1] plus ``t/T``, for centralised critics. A capture an
 both *terminate* the episode: the timeout is part of the game (it is observed through the time
 index and carries the -lambda_capture reward), not an external truncation.
 
+``infos`` have the same keys after ``reset`` as after ``step``: ``captured``, ``distance`` (m) and
+``sees_opponent``. TorchRL's ``PettingZooWrapper`` builds its info spec from the first reset, so
+these reach its tensordicts (and BenchMARL's logs).
+
 The env runs :class:`~pecli.game.single.SingleGame`, the scalar mirror of the batched game,
 which steps one game about 20 times faster than ``Game(n=1)``.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -56,7 +61,18 @@ class PursuitEvasionEnv(ParallelEnv):
     ) -> tuple[dict[Role, np.ndarray], dict[Role, dict]]:
         obs = self._game.reset(seed=seed)
         self.agents = list(self.possible_agents)
-        return obs, {role: {} for role in ROLES}
+        return obs, self._reset_infos(obs)
+
+    def _reset_infos(self, obs: dict[Role, np.ndarray]) -> dict[Role, dict[str, Any]]:
+        """The infos of a step, for the start state: no capture, the distance (m) and the seen flags."""
+        state = self._game.state().tolist()
+        k = 5 if self.scenario.pursuer.kind == "car" else 4  # the pursuer's state comes first
+        dx, dy = state[k] - state[0], state[k + 1] - state[1]
+        distance = math.sqrt(dx * dx + dy * dy)
+        return {
+            role: {"captured": False, "distance": distance, "sees_opponent": bool(obs[role][-2] > 0.0)}
+            for role in ROLES
+        }
 
     def step(self, actions: dict[Role, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
@@ -79,8 +95,11 @@ class PursuitEvasionEnv(ParallelEnv):
     def state(self) -> np.ndarray:
         return self._game.normalised_state()
 
-    def render(self) -> None:
-        """Not supported step by step; use ``pecli play --render`` for pictures and GIFs."""
+    def render(self, mode: str | None = None) -> None:
+        """Not supported step by step; use ``pecli play --render`` for pictures and GIFs.
+
+        ``mode`` is ignored: RLlib's ``ParallelPettingZooEnv.render`` passes its render mode.
+        """
         return None
 
     def close(self) -> None:

@@ -1,11 +1,16 @@
 """Beliefs: what they cost in training and how well they locate an unseen opponent.
 
     python benchmarks/bench_belief.py speed      # (a) training transitions/s per belief kind, as a ratio to none
+    python benchmarks/bench_belief.py league     # (a') CPU seconds of a self-play round per kind at the league recipe
     python benchmarks/bench_belief.py quality    # (b) unseen-position error on held-out games
 
 (a) trains the pursuer on the paper scenario with each ``--belief`` for the same number of
 transitions, with learning and belief fitting both active (warm-ups shortened), in one process
 on one torch thread, median of ``--repeats``.
+
+(a') runs ``pecli selfplay -c league --belief KIND --rounds 1`` for each kind (BiMDN kinds with
+``--hidden`` units, 64 as the league recipe runs them), the warm-ups shortened so that learning and belief fitting
+both run, and reads each side's CPU seconds from the run's ``selfplay.json``.
 
 (b) collects history windows of a pure-pursuit pursuer against the random-walk, greedy and rash
 evaders (``--games`` per evader), fits the BiMDN and the image belief on them by NLL (paper
@@ -21,8 +26,12 @@ What a belief adds to capture, in the curve runs (c) and in self-play (d): ``ben
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -62,6 +71,34 @@ def speed(args: argparse.Namespace) -> None:
     for kind, values in rates.items():
         rate = statistics.median(values)
         print(f"| {kind} | {rate:,.0f} | {rate / reference:.2f} |" if reference else f"| {kind} | {rate:,.0f} | - |")
+
+
+def league(args: argparse.Namespace) -> None:
+    warmups = ["learning_starts=1000", "belief_settings.warmup=1000"]
+    seconds: dict[str, list[float]] = {kind: [] for kind in args.kinds}
+    with tempfile.TemporaryDirectory(prefix="bench-belief-") as zoo:
+        for repeat in range(args.repeats):
+            for kind in args.kinds:
+                name = f"{kind}-{repeat}"
+                sets = [*warmups, *([f"belief_settings.hidden={args.hidden}"] if kind.startswith("bimdn") else [])]
+                command = [sys.executable, "-m", "pecli", "selfplay", "-c", "league", "--belief", kind, "--rounds", "1"]
+                command += ["--steps-per-round", str(args.steps), "--zoo", zoo, "--name", name, "--quiet"]
+                command += [part for item in sets for part in ("--set", item)]
+                env = {**os.environ, "PYTHONPATH": str(ROOT)}
+                subprocess.run(command, check=True, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
+                turns = json.loads((Path(zoo) / name / "selfplay.json").read_text())["turns"]
+                seconds[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns))
+                print(f"{kind}: {seconds[kind][-1]:.1f} CPU-s", file=sys.stderr)
+    reference = statistics.median(seconds["none"]) if "none" in seconds else None
+    print(
+        f"league: 1 self-play round, {args.steps} transitions per side, warm-ups 1 000, BiMDN {args.hidden} units, "
+        f"median of {args.repeats}"
+    )
+    print("| belief | CPU s per round | vs none |")
+    print("| --- | ---: | ---: |")
+    for kind, values in seconds.items():
+        cpu = statistics.median(values)
+        print(f"| {kind} | {cpu:.1f} | {cpu / reference:.2f} |" if reference else f"| {kind} | {cpu:.1f} | - |")
 
 
 def _windows(scenario, evaders: list[str], games: int, seed: int):
@@ -208,6 +245,11 @@ def main() -> None:
     s.add_argument("--kinds", nargs="+", default=list(KINDS))
     s.add_argument("--steps", type=int, default=4000)
     s.add_argument("--repeats", type=int, default=3)
+    g = sub.add_parser("league")
+    g.add_argument("--kinds", nargs="+", default=list(KINDS))
+    g.add_argument("--steps", type=int, default=10000, help="transitions per side")
+    g.add_argument("--hidden", type=int, default=64, help="BiMDN units per direction")
+    g.add_argument("--repeats", type=int, default=1)
     q = sub.add_parser("quality")
     q.add_argument("--config", default="paper")
     q.add_argument("--games", type=int, default=2000, help="training games per evader")
@@ -223,7 +265,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     th.set_num_threads(1)
-    {"speed": speed, "quality": quality}[args.step](args)
+    {"speed": speed, "league": league, "quality": quality}[args.step](args)
 
 
 if __name__ == "__main__":

@@ -23,23 +23,31 @@ GRID = 16  # cells per side
 
 
 def rasterise(window: DecodedWindow, decoder: WindowDecoder, grid: int = GRID) -> np.ndarray:
-    """Images ``(B, 3, grid, grid)`` float32 from decoded windows (row index = y, column = x)."""
+    """Images ``(B, 3, grid, grid)`` float32 from decoded windows (row index = y, column = x).
+
+    A cell's value in a channel is the recency of the newest sample that marks it (0 if none): recency
+    grows with the sample's index, so the newest marking sample is the largest of them.
+    """
     batch, steps = window.seen.shape
     centres = (np.arange(grid) + 0.5) / grid * 2.0 - 1.0  # normalised cell centres
-    cx, cy = np.meshgrid(centres, centres)  # (grid, grid), cy varies along rows
     half_x, half_y = decoder.half
-    recency = ((np.arange(steps) + 1) / steps)[None, :, None]  # (1, T, 1)
-    # own sensor coverage: cells within range (and the wedge, for a car) at each sample
-    dx = (cx.reshape(1, 1, -1) - window.own_pos[..., :1]) * half_x  # (B, T, cells) metres
-    dy = (cy.reshape(1, 1, -1) - window.own_pos[..., 1:]) * half_y
-    distance = np.sqrt(dx * dx + dy * dy)
+    recency = (np.arange(steps) + 1) / steps  # (T,)
+    # own sensor coverage: cells within range (and the wedge, for a car) at each sample; a cell's offset
+    # is its column's x offset and its row's y offset, so those are computed per column and per row
+    dx = ((centres - window.own_pos[..., :1]) * half_x)[..., None, :]  # (B, T, 1, grid) metres, by column
+    dy = ((centres - window.own_pos[..., 1:]) * half_y)[..., :, None]  # (B, T, grid, 1) metres, by row
+    distance = np.sqrt(dx * dx + dy * dy)  # (B, T, grid, grid)
     covered = distance <= decoder.sensor.range
     if decoder.has_heading and decoder.sensor.fov < 2 * math.pi:
-        heading = window.own_heading[..., None]
-        covered &= np.cos(heading) * dx + np.sin(heading) * dy >= math.cos(0.5 * decoder.sensor.fov) * distance
-    covered &= window.valid[..., None]
+        heading = window.own_heading[..., None, None]
+        distance *= math.cos(0.5 * decoder.sensor.fov)
+        covered &= np.cos(heading) * dx + np.sin(heading) * dy >= distance
+    covered &= window.valid[..., None, None]
+    covered = covered.reshape(batch, steps, grid * grid)  # cell = row * grid + column
     image = np.zeros((batch, 3, grid * grid), dtype=np.float32)
-    image[:, 0] = (covered * recency).max(axis=1)
+    newest = steps - 1 - np.argmax(covered[:, ::-1], axis=1)  # (B, cells): the newest covering sample
+    image[:, 0] = np.where(covered.any(axis=1), recency[newest], 0.0)
+    games = np.arange(batch)
     for channel, positions, present in (
         (1, window.opp_pos, window.seen & window.valid),
         (2, window.own_pos, window.valid),
@@ -47,8 +55,10 @@ def rasterise(window: DecodedWindow, decoder: WindowDecoder, grid: int = GRID) -
         col = np.clip(((positions[..., 0] + 1.0) / 2.0 * grid).astype(np.int64), 0, grid - 1)
         row = np.clip(((positions[..., 1] + 1.0) / 2.0 * grid).astype(np.int64), 0, grid - 1)
         cells = row * grid + col  # (B, T)
-        weights = np.where(present, recency[..., 0], 0.0)
-        np.maximum.at(image[:, channel], (np.arange(batch)[:, None].repeat(steps, 1), cells), weights)
+        target = image[:, channel]
+        for t in np.flatnonzero(present.any(axis=0)):  # oldest first: a newer sample overwrites an older one
+            marked = present[:, t]
+            target[games[marked], cells[marked, t]] = recency[t]
     return image.reshape(batch, 3, grid, grid)
 
 

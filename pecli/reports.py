@@ -89,9 +89,12 @@ def numbered_grids(results: TournamentResults, width: int = TABLE_WIDTH) -> list
 
     def part(first: int, last: int) -> Table:
         shown = "" if (first, last) == (0, len(pursuers)) else f" (pursuers P{first + 1}-P{last})"
+        title = (
+            f"{results.scenario.name}: capture rate{shown}, {results.episodes} episodes × {len(results.seeds)} seeds"
+        )
         table = Table(
-            title=f"{results.scenario.name}: capture rate{shown}, {results.episodes} episodes × "
-            f"{len(results.seeds)} seeds per pairing",
+            title=title,
+            min_width=min(width, len(title)),  # the title on one line, not wrapped to a few narrow columns
             caption="bold: the best pursuer against that evader, or tied with it (two-proportion z-test, "
             "p > 0.05); time-to-capture per pairing in results.csv",
             box=None,

@@ -66,9 +66,21 @@ class PolicyGraph(nn.Module):
 
     def __init__(self, actor: nn.Module, layout: SILayout) -> None:
         super().__init__()
-        self.encoder = SIEncoder(layout)
-        self.act = deterministic_actor(actor)
         belief: BeliefModel | None = getattr(actor.features_extractor, "belief", None)
+        self._build(deterministic_actor(actor), layout, belief)
+
+    @classmethod
+    def of_network(cls, network: nn.Module, layout: SILayout) -> PolicyGraph:
+        """The graph of a network from the game's observations ``(B, dim)`` to actions ``(B, 2)`` in [-1, 1]
+        (one frame, no belief): a player trained by another library."""
+        graph = cls.__new__(cls)
+        nn.Module.__init__(graph)
+        graph._build(network, layout, None)
+        return graph
+
+    def _build(self, act: nn.Module, layout: SILayout, belief: BeliefModel | None) -> None:
+        self.encoder = SIEncoder(layout)
+        self.act = act
         self.belief = belief_module(belief) if belief is not None else None
         self.frame = belief.frame if belief is not None else None  # belief points → the actor's frame
         self.mixed = belief is not None and belief.kind == "bimdn-mixed"

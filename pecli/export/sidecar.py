@@ -94,11 +94,12 @@ def build_sidecar(
     graph: PolicyGraph,
     scenario: Scenario,
     meta: CheckpointMeta,
-    checkpoint: Path,
+    checkpoint: Path | None,
     opset: int,
     draws: int,
 ) -> dict[str, Any]:
-    """Everything but ``model_sha256`` and ``parity``, which the export adds once it has them."""
+    """Everything but ``model_sha256`` and ``parity``, which the export adds once it has them
+    (``checkpoint`` is None for a network trained elsewhere: its file and hash are then null)."""
     layout = SILayout(scenario, meta.role)
     controls = robot_fields(scenario, meta, draws)
     return {
@@ -109,8 +110,8 @@ def build_sidecar(
         "role": meta.role,
         "belief": meta.belief,
         "checkpoint": {
-            "file": checkpoint.name,
-            "sha256": file_sha256(checkpoint),
+            "file": checkpoint.name if checkpoint is not None else None,
+            "sha256": file_sha256(checkpoint) if checkpoint is not None else None,
             **{key: getattr(meta, key) for key in ("run", "steps", "episodes", "algo", "seed", "pecli_version")},
         },
         "scenario": {

@@ -1,7 +1,18 @@
-"""pecli's PettingZoo env inside other multi-agent libraries: env-steps/s in each library's own sampling loop.
+"""pecli against other multi-agent libraries on its own game: their sampling speed, and their players' strength.
 
     python benchmarks/bench_peers.py envs                  # the run recorded in docs/benchmarks/peers.md
     python benchmarks/bench_peers.py envs --quick          # a short smoke run
+    python benchmarks/bench_peers.py train --peers rllib-ppo benchmarl-masac --seeds 0 1 2 --cpu-hours 1
+    python benchmarks/bench_peers.py match --pecli runs/league-s0 runs/league-s1 runs/league-s2 --episodes 500
+
+``train`` trains both roles of the ``paper`` game with each peer library (``benchmarks/peers/``) until the CPU
+time of the training process and its children reaches ``--cpu-hours``, then exports each role's deterministic
+actor with :func:`pecli.export.network.export_network` to ``<zoo>/<peer>-s<seed>/{pursuer,evader}.onnx``; a
+run whose exports exist is skipped. ``match`` plays one tournament (cached in ``<zoo>/tournament``) of pecli's
+handed-over players (``<run>/<role>/average.zip``, one run per seed, paired with the peers' runs of the same seed
+by order), the peers' players, the scripted players and the adversarial evaders, and prints the swap targets:
+pecli's pursuer against a peer's evader beside the peer's own pursuer, and pecli's evader against a peer's
+pursuer beside the peer's own evader.
 
 Needs the ``peers`` extra (``pip install -e ".[peers]"``); a library that is missing is skipped. Each figure is
 env-steps per CPU-second (``time.process_time`` of this process, one torch thread), the median of ``--repeats``
@@ -21,12 +32,23 @@ import time
 import warnings
 from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
 from pecli.game.pettingzoo_env import parallel_env  # noqa: E402
+from pecli.scenario import load_scenario  # noqa: E402
+from pecli.stats import difference_interval  # noqa: E402
+from pecli.tournament import PairingResult  # noqa: E402
+
+# a peer: (its module in benchmarks/peers/, keyword arguments of its train function)
+PEERS: dict[str, tuple[str, dict[str, str]]] = {
+    "rllib-ppo": ("rllib_ppo", {}),
+    "benchmarl-masac": ("benchmarl_run", {"algorithm": "masac"}),
+    "benchmarl-maddpg": ("benchmarl_run", {"algorithm": "maddpg"}),
+}
 
 
 def rate(block: Callable[[], int], repeats: int) -> float:
@@ -158,6 +180,110 @@ def envs(args: argparse.Namespace) -> None:
         print(f"| {name} | {value:,.0f} | {1e6 / value:,.0f} us | {share} |")
 
 
+def train(args: argparse.Namespace) -> None:
+    import importlib
+    import sys
+
+    from pecli.export.network import export_network
+    from pecli.io import atomic_write_json
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    scenario = load_scenario(args.config)
+    for peer in args.peers:
+        module_name, kwargs = PEERS[peer]
+        module = importlib.import_module(f"peers.{module_name}")
+        for seed in args.seeds:
+            out = args.zoo / f"{peer}-s{seed}"
+            if all((out / f"{role}.onnx").is_file() for role in ("pursuer", "evader")):
+                print(f"{out}: trained and exported already")
+                continue
+            out.mkdir(parents=True, exist_ok=True)
+            print(f"{peer}, seed {seed}: {args.cpu_hours:g} CPU-h into {out}", flush=True)
+            run = module.train(args.config, args.cpu_hours * 3600, seed, out, **kwargs)
+            for role, actor in run.actors.items():
+                result = export_network(
+                    actor, role, scenario, out / f"{role}.onnx", algo=peer, run=out.name, seed=seed,
+                    steps=run.steps, episodes=run.episodes,
+                )  # fmt: skip
+                print(f"  {role}: {result.model} (parity {result.parity.max_action_difference:.1e})")
+            record = {
+                "peer": peer, "library": run.library, "seed": seed, "cpu_seconds": run.cpu_seconds,
+                "steps": run.steps, "episodes": run.episodes, "iterations": run.iterations,
+                "settings": run.settings, "versions": versions(),
+            }  # fmt: skip
+            atomic_write_json(out / "peer.json", record)
+
+
+def pecli_players(run: Path) -> dict[str, str]:
+    """A pecli self-play run's handed-over players."""
+    players = {role: run / role / "average.zip" for role in ("pursuer", "evader")}
+    missing = [str(path) for path in players.values() if not path.is_file()]
+    if missing:
+        raise SystemExit(f"{run} is not a finished self-play run: no {missing[0]}")
+    return {role: str(path) for role, path in players.items()}
+
+
+def match(args: argparse.Namespace) -> None:
+    from pecli.experiment.compare import ADVERSARIES, HEURISTIC_EVADERS
+    from pecli.tournament import pairing_results, player_spec
+
+    scenario = load_scenario(args.config)
+    teams: dict[str, list[dict[str, str]]] = {"pecli": [pecli_players(run) for run in args.pecli]}
+    for peer in PEERS:
+        runs = sorted(args.zoo.glob(f"{peer}-s*/pursuer.onnx"))
+        if runs:
+            teams[peer] = [{role: str(r.parent / f"{role}.onnx") for role in ("pursuer", "evader")} for r in runs]
+    fixed_evaders = [*HEURISTIC_EVADERS, *ADVERSARIES]
+    pursuers = [p["pursuer"] for team in teams.values() for p in team] + ["pure-pursuit"]
+    evaders = [p["evader"] for team in teams.values() for p in team] + fixed_evaders
+    print(f"{len(pursuers)} pursuers x {len(evaders)} evaders, {args.episodes} games a pairing", flush=True)
+    grid = pairing_results(scenario, pursuers, evaders, args.episodes, [0], args.zoo / "tournament", args.workers)
+
+    def result(pursuer: str, evader: str) -> PairingResult:
+        return grid[(player_spec(pursuer), player_spec(evader))]
+
+    def rate(pursuer: str, evader: str) -> float:
+        return result(pursuer, evader).capture_rate
+
+    print("\n| team | seeds | pursuer vs scripted and adversarial evaders | evader vs pure pursuit (escapes) |")
+    print("| --- | ---: | ---: | ---: |")
+    for name, team in teams.items():
+        chase = [statistics.mean(rate(p["pursuer"], e) for e in fixed_evaders) for p in team]
+        escape = [1 - rate("pure-pursuit", p["evader"]) for p in team]
+        print(f"| {name} | {len(team)} | {spread(chase)} | {spread(escape)} |")
+
+    print("\n| peer | seed | pecli's pursuer catches the peer's evader | the peer's pursuer does | lead (95 %) |"
+          " pecli's evader escapes the peer's pursuer | the peer's evader does | lead (95 %) |")  # fmt: skip
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    ours = teams["pecli"]
+    for peer, team in teams.items():
+        if peer == "pecli":
+            continue
+        for theirs, mine in zip(team, ours):
+            own = result(theirs["pursuer"], theirs["evader"])
+            chase = swap(result(mine["pursuer"], theirs["evader"]), own, escapes=False)
+            flee = swap(result(theirs["pursuer"], mine["evader"]), own, escapes=True)
+            print(f"| {peer} | {Path(theirs['pursuer']).parent.name} | {chase} | {flee} |")
+    print("\ntargets: each difference >= +0.10; pecli ahead of every peer in the first table")
+
+
+def swap(pecli: PairingResult, peer: PairingResult, escapes: bool) -> str:
+    """Table cells: pecli's player in the peer's place, the peer's own, and pecli's lead with its 95 % interval
+    (in captures for pursuers, in escapes for evaders)."""
+    a, b = (peer, pecli) if escapes else (pecli, peer)  # pecli's evader leads when the peer's pursuer catches less
+    low, high = difference_interval(a.captures, a.episodes, b.captures, b.episodes)
+    rates = [1 - pecli.capture_rate, 1 - peer.capture_rate] if escapes else [pecli.capture_rate, peer.capture_rate]
+    lead = a.capture_rate - b.capture_rate
+    return f"{rates[0]:.3f} | {rates[1]:.3f} | {lead:+.3f} [{low:+.2f}, {high:+.2f}]"
+
+
+def spread(values: list[float]) -> str:
+    """Median and range over seeds."""
+    if len(values) == 1:
+        return f"{values[0]:.3f}"
+    return f"{statistics.median(values):.3f} ({min(values):.3f}-{max(values):.3f})"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -167,6 +293,20 @@ def main() -> None:
     envs_parser.add_argument("--quick", action="store_true", help="fewer steps, for a smoke test")
     envs_parser.add_argument("--json", action="store_true", help="print the results as JSON")
     envs_parser.set_defaults(run=envs)
+    train_parser = commands.add_parser("train", help="train both roles with each peer library and export them")
+    train_parser.add_argument("--peers", nargs="+", default=list(PEERS), choices=list(PEERS))
+    train_parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    train_parser.add_argument("--cpu-hours", type=float, default=1.0)
+    train_parser.add_argument("--config", default="paper", help="the scenario")
+    train_parser.add_argument("--zoo", type=Path, default=Path("runs/peers"))
+    train_parser.set_defaults(run=train)
+    match_parser = commands.add_parser("match", help="one tournament of pecli's, the peers' and the fixed players")
+    match_parser.add_argument("--pecli", nargs="+", type=Path, required=True, help="pecli self-play runs, by seed")
+    match_parser.add_argument("--zoo", type=Path, default=Path("runs/peers"))
+    match_parser.add_argument("--config", default="paper", help="the scenario")
+    match_parser.add_argument("--episodes", type=int, default=500)
+    match_parser.add_argument("--workers", type=int, default=2)
+    match_parser.set_defaults(run=match)
     args = parser.parse_args()
     args.run(args)
 

@@ -46,6 +46,7 @@ def test_builtin_experiments() -> None:
         "smoke",
         "table1",
         "table1-small",
+        "table1-paper-settings",
         "table2",
         "strength",
         "schedules",
@@ -56,11 +57,15 @@ def test_builtin_experiments() -> None:
         "strength-lite",
         "strength-floor",
     } <= set(builtin_experiments())
-    small = load_experiment("table1-small")
-    assert {run.kind for run in small.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
-    assert len(small.runs()) == 15 and len({run.name for run in small.runs()}) == 15
-    run = small.runs()[0]
+    paper_settings = load_experiment("table1-paper-settings")
+    assert {run.kind for run in paper_settings.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
+    assert len(paper_settings.runs()) == 15 and len({run.name for run in paper_settings.runs()}) == 15
+    run = paper_settings.runs()[0]
     assert run.scenario.training.belief == run.kind and run.scenario.training.selfplay.rounds == 8
+    table1 = load_experiment("table1-small")  # the same grid trained by the league recipe, 1 CPU-hour a run
+    assert [(r.kind, r.seed) for r in table1.runs()] == [(r.kind, r.seed) for r in paper_settings.runs()]
+    assert all(r.schedule == "league" and r.cpu_hours == 1 for r in table1.runs())
+    assert table1.spec.ranking.players == "handed-over" and table1.scenario.fingerprint() == run.scenario.fingerprint()
     assert load_experiment("table2").scenario.name == "point_mass"
     smoke = load_experiment("smoke")
     assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200
@@ -146,6 +151,14 @@ def test_builtin_experiments() -> None:
         ({"tournament": {"players": ["hj"]}}, "tournament.players.0: hj plays point mass vs point mass only"),
         ({"tournament": {"players": ["grabby"]}}, "tournament.players.0: unknown player 'grabby'"),
         ({"tournament": {"episodes": 10**7}}, "tournament.episodes: Input should be less than or equal to 1000000"),
+        ({"ranking": {"players": "best"}}, "ranking.players: Input should be 'ranked' or 'handed-over'"),
+        (
+            {
+                "runs": {**SMOKE["runs"], "schedules": ["selfplay", "evader"], "opponent": "greedy"},
+                "ranking": {"players": "handed-over"},
+            },
+            "handed-over takes each self-play run's average.zip, and schedules ['evader'] train one role",
+        ),
     ],
 )
 def test_bad_experiment_files_give_one_line(tmp_path: Path, change: dict, message: str) -> None:
@@ -540,6 +553,52 @@ def test_the_ranking_keeps_a_leagues_main_agents_not_its_exploiters() -> None:
         load_scenario("quick"), {"pursuer": [main, exploiter], "evader": [evader]}, pairings, [], 10, [0]
     )
     assert keep_best(results, [run], keep=1)[run.name] == {"pursuer": [main.spec], "evader": [evader.spec]}
+
+
+def test_handed_over_players_are_each_runs_averages(tmp_path: Path) -> None:
+    from pecli.experiment.pipeline import handed_over
+
+    grid = {**SMOKE["runs"], "schedules": ["league"]}
+    runs = experiment_from_dict({**SMOKE, "runs": grid}, "exp.yaml").runs()
+    for run in runs:
+        for role in ("pursuer", "evader"):
+            (tmp_path / run.name / role).mkdir(parents=True)
+            (tmp_path / run.name / role / "average.zip").write_bytes(b"")
+    kept = handed_over(runs, tmp_path)
+    assert kept == {
+        run.name: {role: [str(tmp_path / run.name / role / "average.zip")] for role in ("pursuer", "evader")}
+        for run in runs
+    }
+    (tmp_path / runs[0].name / "evader" / "average.zip").unlink()
+    with pytest.raises(PecliError, match=f"{runs[0].name} hands over no player: .*evader/average.zip is missing"):
+        handed_over(runs, tmp_path)
+
+
+def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the_papers(tmp_path: Path) -> None:
+    from pecli.experiment.report import ExperimentReport
+    from pecli.io import atomic_write_json
+    from pecli.tournament import PairingResult, Player, TournamentResults, rate
+
+    data = {**SMOKE, "runs": {**SMOKE["runs"], "schedules": ["league"]}, "ranking": {"players": "handed-over"}}
+    experiment = experiment_from_dict(data, "exp.yaml")
+    out = tmp_path / "out"
+    (out / "tournament").mkdir(parents=True)
+    (out / "experiment.yaml").write_text(yaml.safe_dump(data))
+    players: dict = {"pursuer": [Player("pure-pursuit", "pure-pursuit", "pursuer", "pure-pursuit")], "evader": []}
+    players["evader"].append(Player("greedy", "greedy", "evader", "greedy"))
+    kept = {}
+    for run in experiment.runs():
+        kept[run.name] = {role: [f"zoo/{run.name}/{role}/average.zip"] for role in ("pursuer", "evader")}
+        for role in ("pursuer", "evader"):
+            players[role].append(Player(f"{run.name}/{role}", kept[run.name][role][0], role, run.name + role))
+    pairings = [PairingResult(p.name, e.name, 10, 7, 0.5, 0.1) for p in players["pursuer"] for e in players["evader"]]
+    results = TournamentResults(experiment.scenario, players, pairings, rate(players, pairings), 10, [0])
+    atomic_write_json(out / "tournament" / "results.json", results.to_json())
+    atomic_write_json(out / "kept.json", kept)
+    text = ExperimentReport(out).markdown()
+    assert "Players: each run's handed-over average.zip" in text and "Ranking:" not in text
+    assert "| evader \\ pursuer | Pure Pursuit | MADDPG |" in text  # not "MADDPG (league)": the paper's kind
+    assert "| Greedy | **0.70**† / 0.34 (+0.36) | **0.70**† / 0.83 (−0.13) |" in text
 
 
 # -- on Ray ---------------------------------------------------------------------------------------------

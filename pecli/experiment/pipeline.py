@@ -308,6 +308,10 @@ class ExperimentRunner:
         from pecli.tournament import find_players, schedule
 
         settings = self.experiment.spec.ranking
+        if settings.players == "handed-over":
+            kept = handed_over([row.run for row in self.rows], self.zoo)
+            atomic_write_json(self.out / KEPT_FILE, kept)
+            return kept
         runs = self.experiment.grid_order([row.run for row in self.rows])
         found = find_players([str(self.zoo / run.name) for run in runs], self.experiment.scenario)
         pairings = schedule(found.players, sample=settings.sample, seed=0)
@@ -365,6 +369,21 @@ class ExperimentRunner:
         paths = write_report(self.out)
         self.stages["report"] = "done"
         return paths[0]
+
+
+def handed_over(runs: list[RunSpec], zoo: Path) -> dict[str, dict[str, list[str]]]:
+    """Each self-play run's handed-over players, ``<zoo>/<run>/<role>/average.zip``: ``{run: {role: [path]}}``;
+    :class:`PecliError` for a run that has none (it trained no round)."""
+    from pecli.rl.handover import AVERAGE_FILE
+
+    kept: dict[str, dict[str, list[str]]] = {}
+    for run in runs:
+        paths = {role: zoo / run.name / role / AVERAGE_FILE for role in run.roles}
+        missing = [str(path) for path in paths.values() if not path.is_file()]
+        if missing:
+            raise PecliError(f"{run.name} hands over no player: {missing[0]} is missing (did it train a round?)")
+        kept[run.name] = {role: [str(path)] for role, path in paths.items()}
+    return kept
 
 
 def keep_best(results: TournamentResults, runs: list[RunSpec], keep: int) -> dict[str, dict[str, list[str]]]:

@@ -102,13 +102,15 @@ class ExperimentReport:
                 "`pecli experiment run` writes): run it again to rewrite them"
             )
         runs = {run.name: run for run in self.experiment.runs()}
+        one_schedule = len(self.experiment.spec.runs.schedules) == 1  # then a kind's group is the paper's kind
         self.group_of_spec: dict[str, str] = {}
         learned: list[str] = []
         for name, roles in kept.items():
             run = runs.get(name)
             if run is None:
                 continue
-            label = KIND_LABELS[run.kind] if run.schedule == "selfplay" else f"{KIND_LABELS[run.kind]} ({run.schedule})"
+            plain = one_schedule or run.schedule == "selfplay"
+            label = KIND_LABELS[run.kind] if plain else f"{KIND_LABELS[run.kind]} ({run.schedule})"
             learned.append(label)
             for paths in roles.values():
                 for path in paths:
@@ -208,6 +210,15 @@ class ExperimentReport:
         matrix = np.array([[rates[p, e] for e in names["evader"]] for p in names["pursuer"]])
         return solve(names["pursuer"], names["evader"], matrix).exploitability()
 
+    def _ranking_text(self) -> str:
+        ranking = self.experiment.spec.ranking
+        if ranking.players == "handed-over":
+            return "Players: each run's handed-over average.zip (the mean of its last rounds), no ranking."
+        return (
+            f"Ranking: each checkpoint against {ranking.sample} random checkpoints of the other side, "
+            f"{ranking.episodes} × {ranking.seeds} episodes, best {ranking.keep} per run and role kept."
+        )
+
     def markdown(self) -> str:
         spec, grid = self.experiment.spec, self.experiment.spec.runs
         budget = (
@@ -224,10 +235,8 @@ class ExperimentReport:
             f"# {spec.name}: {title}",
             "",
             f"Scenario `{self.experiment.scenario.name}`; runs: {len(grid.kinds)} kinds × {len(grid.seeds)} seeds "
-            f"({', '.join(grid.schedules)}), {budget}. Ranking: each checkpoint against {spec.ranking.sample} random "
-            f"checkpoints of the other side, {spec.ranking.episodes} × {spec.ranking.seeds} episodes, best "
-            f"{spec.ranking.keep} per run and role kept. Tournament: {self.data['episodes_per_seed']} episodes × "
-            f"{len(self.data['seeds'])} seeds per pairing.",
+            f"({', '.join(grid.schedules)}), {budget}. {self._ranking_text()} Tournament: "
+            f"{self.data['episodes_per_seed']} episodes × {len(self.data['seeds'])} seeds per pairing.",
             "",
             "## Capture rate: ours / the paper's (difference)",
             "",

@@ -120,8 +120,13 @@ class RunGrid(_Model):
 
 class Ranking(_Model):
     """The paper's checkpoint ranking: each checkpoint against ``sample`` random checkpoints of the other
-    side; the best ``keep`` of each run and role by mean capture rate go to the tournament."""
+    side; the best ``keep`` of each run and role by mean capture rate go to the tournament. With
+    ``players: handed-over`` no games are played: each self-play run's ``<role>/average.zip`` (the mean of its
+    last rounds, what ``pecli selfplay`` hands over) goes to the tournament."""
 
+    players: Literal["ranked", "handed-over"] = Field(
+        default="ranked", description="ranked: the paper's ranking; handed-over: each run's average.zip"
+    )
     sample: int = Field(default=32, ge=1, le=100_000)
     episodes: int = Field(default=100, ge=1, le=MAX_EPISODES, description="episodes per seed and pairing")
     seeds: int = Field(default=1, ge=1, le=MAX_SEEDS)
@@ -152,6 +157,16 @@ class Experiment(_Model):
     ranking: Ranking = Ranking()
     tournament: TournamentSettings = TournamentSettings()
     report: ReportSettings = ReportSettings()
+
+    @model_validator(mode="after")
+    def _handed_over(self) -> Experiment:
+        single = sorted(set(self.runs.schedules) - set(SELFPLAY_SCHEDULES))
+        if self.ranking.players == "handed-over" and single:
+            raise ValueError(
+                f"ranking.players: handed-over takes each self-play run's average.zip, and schedules {single} "
+                "train one role without one (use ranking.players: ranked)"
+            )
+        return self
 
     def fingerprint(self) -> str:
         """A hash of everything that decides what the experiment computes (not its name or description;

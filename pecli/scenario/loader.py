@@ -40,6 +40,7 @@ BUILTIN_EXPERIMENTS = (
     "strength-share",
     "strength-small",
     "table1",
+    "table1-paper-settings",
     "table1-small",
     "table2",
 )

@@ -28,6 +28,7 @@ from pecli.zoo import metadata_path
 
 runner = CliRunner()
 
+EXPLOITER_KEYS = ("league_exploiter_every", "league_exploiter_roles", "league_exploiter_share")
 SMOKE = {
     "name": "t",
     "scenario": "quick",
@@ -56,6 +57,8 @@ def test_builtin_experiments() -> None:
         "strength-share",
         "strength-lite",
         "strength-floor",
+        "exploitability",
+        "exploitability-exploiters",
     } <= set(builtin_experiments())
     paper_settings = load_experiment("table1-paper-settings")
     assert {run.kind for run in paper_settings.runs()} == {"none", "ukf", "image", "bimdn", "bimdn-mixed"}
@@ -105,6 +108,14 @@ def test_builtin_experiments() -> None:
     )
     sharing = load_experiment("strength-share").runs()[0].scenario.training.selfplay  # and a share of the games
     assert (sharing.exploiter_join_games, sharing.league_exploiter_share, sharing.league_floor) == (200, 0.25, 0.3)
+    exploiters = load_experiment("exploitability-exploiters").runs()  # the league arm of exploitability, + exploiters
+    league = [r for r in load_experiment("exploitability").runs() if r.schedule == "league"]
+    for mine, theirs in zip(exploiters, league, strict=True):
+        settings = mine.scenario.training.selfplay
+        assert (settings.league_exploiter_every, settings.league_exploiter_roles) == (1, ["evader"])
+        assert settings.league_exploiter_share == 0.2 and mine.cpu_hours == theirs.cpu_hours == 4
+        plain = settings.model_copy(update={k: getattr(theirs.scenario.training.selfplay, k) for k in EXPLOITER_KEYS})
+        assert plain == theirs.scenario.training.selfplay and mine.name == theirs.name
     lite = load_experiment("strength-lite").runs()  # strength-small's runs but for a BiMDN of 64 units
     assert [r.scenario.training.belief_settings.hidden for r in lite] == [64] * 6
     for mine, theirs in zip(lite, small.runs(), strict=True):  # so its `none` runs are strength-small's

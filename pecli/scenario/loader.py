@@ -30,6 +30,7 @@ BUILTIN_SCENARIOS = ("car_vs_car", "league", "paper", "point_mass", "quick", "ro
 
 BUILTIN_EXPERIMENTS = (
     "exploitability",
+    "exploitability-exploiters",
     "schedules",
     "smoke",
     "strength",

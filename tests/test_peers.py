@@ -77,7 +77,8 @@ def test_benchmarl_runs_a_custom_task(tmp_path: Path) -> None:
     from benchmarl.algorithms import MasacConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models.mlp import MlpConfig
-    from benchmarl_task import PecliTask
+
+    from pecli.peers.benchmarl import PecliTask
 
     config = ExperimentConfig.get_from_yaml()
     config.loggers, config.evaluation, config.render, config.create_json = [], False, False, False

@@ -1,4 +1,4 @@
-"""A test helper: a pecli scenario as a BenchMARL task (imported by test_peers where benchmarl is installed).
+"""A pecli scenario as a BenchMARL task (needs benchmarl, of the ``peers`` extra).
 
 BenchMARL pickles the task into its experiment folder, so the class lives in an importable module.
 """

@@ -1,0 +1,1 @@
+"""Adapters for other multi-agent libraries, imported only where they are installed."""

@@ -1,5 +1,6 @@
 """Statistics for comparing policies: the paper's two-proportion z-test, its stratified form (Mantel–Haenszel),
-intervals of capture rates and of their differences, and Bradley–Terry ratings."""
+intervals of capture rates and of their differences, Bradley–Terry ratings, and the interquartile mean over runs
+with its stratified-bootstrap interval."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 from scipy.special import expit, log_expit
-from scipy.stats import binomtest
+from scipy.stats import binomtest, trim_mean
 
 
 def two_proportion_z_test(successes_a: int, n_a: int, successes_b: int, n_b: int) -> float:
@@ -155,3 +156,27 @@ def difference_interval(
         d - math.sqrt((p_a - low_a) ** 2 + (high_b - p_b) ** 2),
         d + math.sqrt((high_a - p_a) ** 2 + (p_b - low_b) ** 2),
     )
+
+
+def interquartile_mean(scores: np.ndarray) -> float:
+    """The mean of the middle half of all ``scores`` (25 % cut from each end), as rliable's aggregate IQM."""
+    return float(trim_mean(np.asarray(scores, dtype=float), 0.25, axis=None))
+
+
+def stratified_bootstrap_interval(
+    scores: np.ndarray, reps: int = 2000, confidence: float = 0.95, seed: int = 0
+) -> tuple[float, float]:
+    """A percentile bootstrap interval of :func:`interquartile_mean` over ``scores`` ``(runs, tasks)``: each
+    resample draws the runs with replacement within every task (column), as rliable's stratified bootstrap.
+
+    (rliable itself needs ``arch``, which does not import beside pandas 3; this is its method in NumPy.)"""
+    scores = np.asarray(scores, dtype=float)
+    if scores.ndim != 2 or min(scores.shape) < 1:
+        raise ValueError(f"scores must be (runs, tasks) with at least one of each, not {scores.shape}")
+    runs, tasks = scores.shape
+    picks = np.random.default_rng(seed).integers(0, runs, size=(reps, runs, tasks))
+    resampled = scores[picks, np.arange(tasks)]  # (reps, runs, tasks): run picks[r, i, j] of task j
+    means = trim_mean(resampled.reshape(reps, -1), 0.25, axis=1)
+    tail = 100 * (1 - confidence) / 2
+    low, high = np.percentile(means, [tail, 100 - tail])
+    return float(low), float(high)

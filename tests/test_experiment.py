@@ -610,6 +610,10 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     assert "Players: each run's handed-over average.zip" in text and "Ranking:" not in text
     assert "| evader \\ pursuer | Pure Pursuit | MADDPG |" in text  # not "MADDPG (league)": the paper's kind
     assert "| Greedy | **0.70**† / 0.34 (+0.36) | **0.70**† / 0.83 (−0.13) |" in text
+    assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
+    assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
+    assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
+    assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
 
 
 # -- on Ray ---------------------------------------------------------------------------------------------

@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
-from pecli.stats import ELO_SCALE, bradley_terry, mantel_haenszel_test, ties_with_best, two_proportion_z_test
+from pecli.stats import (
+    ELO_SCALE,
+    bradley_terry,
+    interquartile_mean,
+    mantel_haenszel_test,
+    stratified_bootstrap_interval,
+    ties_with_best,
+    two_proportion_z_test,
+)
 
 
 def test_z_test_by_hand() -> None:
@@ -72,3 +81,21 @@ def test_bradley_terry_orders_transitively_and_stays_finite() -> None:
     assert ratings["strong pursuer"].elo > ratings["evader"].elo > ratings["weak pursuer"].elo
     perfect = bradley_terry(["p", "e"], [(0, 1, 100, 100)])
     assert all(math.isfinite(r.elo) and math.isfinite(r.stderr) for r in perfect)
+
+
+def test_interquartile_mean_drops_the_outer_quarters() -> None:
+    assert interquartile_mean(np.array([[0.0, 1.0, 2.0, 3.0], [4.0, 5.0, 6.0, 100.0]])) == 3.5  # mean of 2..5
+    assert interquartile_mean(np.full((3, 2), 0.7)) == pytest.approx(0.7)
+
+
+def test_the_stratified_bootstrap_resamples_runs_within_each_task() -> None:
+    same_runs = np.array([[0.2, 0.9], [0.2, 0.9], [0.2, 0.9]])  # runs agree on each task: nothing to resample
+    assert stratified_bootstrap_interval(same_runs) == pytest.approx((0.55, 0.55))
+    rng = np.random.default_rng(1)
+    spread = rng.uniform(0.4, 0.6, size=(3, 6))
+    low, high = stratified_bootstrap_interval(spread, reps=500)
+    assert 0.4 <= low < interquartile_mean(spread) < high <= 0.6
+    wider = stratified_bootstrap_interval(0.5 + 4 * (spread - 0.5), reps=500)  # 4x the runs' spread
+    assert wider[1] - wider[0] > 3 * (high - low)
+    with pytest.raises(ValueError, match=r"scores must be \(runs, tasks\)"):
+        stratified_bootstrap_interval(np.zeros(3))

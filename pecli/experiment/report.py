@@ -22,8 +22,8 @@ from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
-from pecli.roles import ROLES, Role
-from pecli.stats import Rating, ties_with_best
+from pecli.roles import ROLES, Role, opponent_of
+from pecli.stats import Rating, interquartile_mean, stratified_bootstrap_interval, ties_with_best
 from pecli.tournament import PairingResult, Player, TournamentResults, rate
 
 PAPER_EPISODES = 1500  # per cell: 3 models x 500 episodes (paper section V-B)
@@ -210,6 +210,37 @@ class ExperimentReport:
         matrix = np.array([[rates[p, e] for e in names["evader"]] for p in names["pursuer"]])
         return solve(names["pursuer"], names["evader"], matrix).exploitability()
 
+    def kind_intervals(self) -> list[dict[str, Any]]:
+        """Each learned group's players over its runs: the interquartile mean of their rates against every group of
+        the other side (captures for pursuers, escapes for evaders) with a 95 % stratified-bootstrap interval
+        (players resampled within each opposing group), as rliable reports an algorithm over runs and tasks."""
+        totals: dict[tuple[str, str], list[int]] = {}  # (player, opposing group) -> [captures, episodes]
+        for r in self.data["pairings"]:
+            for player, other in ((r["pursuer"], r["evader"]), (r["evader"], r["pursuer"])):
+                entry = totals.setdefault((player, self.player_group[other]), [0, 0])
+                entry[0] += r["captures"]
+                entry[1] += r["episodes"]
+        learned = set(self.group_of_spec.values()) if not self.ours_single else {"ours"}
+        rows = []
+        for role in ROLES:
+            opponents = self.groups[opponent_of(role)]
+            for group in (g for g in self.groups[role] if g in learned):
+                players = [
+                    r["name"]
+                    for r in self.data["ratings"]
+                    if r["role"] == role and self.player_group[r["name"]] == group
+                ]
+                if not players or any((p, o) not in totals for p in players for o in opponents):
+                    continue  # a model that did not meet every group: no interval over groups
+                rates = np.array([[c / n for c, n in (totals[(p, o)] for o in opponents)] for p in players])
+                scores = rates if role == "pursuer" else 1.0 - rates
+                low, high = stratified_bootstrap_interval(scores)
+                rows.append(
+                    {"group": group, "role": role, "players": len(players), "opponent_groups": len(opponents),
+                     "iqm": interquartile_mean(scores), "interval": [low, high]}
+                )  # fmt: skip
+        return rows
+
     def _ranking_text(self) -> str:
         ranking = self.experiment.spec.ranking
         if ranking.players == "handed-over":
@@ -245,6 +276,7 @@ class ExperimentReport:
             "",
         ]
         lines += self._grid(self._rate_text)
+        lines += self._kind_lines()
         lines += ["", "## Normalised time to capture (σ) and episodes per cell", ""]
         if self.table == "II":
             lines += ["The paper's time (σ) in brackets.", ""]
@@ -278,6 +310,28 @@ class ExperimentReport:
             )
         lines += ["", "![capture rate per cell](table.png)", ""]
         return "\n".join(lines)
+
+    def _kind_lines(self) -> list[str]:
+        rows = self.kind_intervals()
+        if not rows:
+            return []
+        lines = [
+            "",
+            "## Each learned group over its models",
+            "",
+            "Interquartile mean of each model's capture rate (pursuers) or escape rate (evaders) against every group "
+            "of the other side, over models × groups, with a 95 % stratified-bootstrap interval (models resampled "
+            "within each group, 2 000 resamples).",
+            "",
+            "| group | role | models | IQM | 95 % interval |",
+            "| --- | --- | ---: | ---: | --- |",
+        ]
+        for row in rows:
+            low, high = row["interval"]
+            lines.append(
+                f"| {row['group']} | {row['role']} | {row['players']} | {row['iqm']:.3f} | [{low:.3f}, {high:.3f}] |"
+            )
+        return lines
 
     def _grid(self, text: Callable[[Cell], str]) -> list[str]:
         """A Markdown table: evader groups as rows, pursuer groups as columns, ``text(cell)`` in each cell."""
@@ -318,6 +372,7 @@ class ExperimentReport:
             "groups": self.groups,
             "cells": [c.to_dict() for c in self.cells],
             "group_ratings": [{**asdict(r), "name": group, "role": role} for group, role, r in self.group_ratings()],
+            "group_intervals": self.kind_intervals(),
             "ratings": [
                 {**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
                 for r in self.data["ratings"]

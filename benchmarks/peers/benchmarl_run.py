@@ -35,6 +35,8 @@ from pecli import process
 from pecli.io import atomic_write_json
 from pecli.peers.benchmarl import PecliTask
 
+from . import PeerRun
+
 ALGORITHMS: dict[str, type[AlgorithmConfig]] = {"masac": MasacConfig, "maddpg": MaddpgConfig}
 RECORD = "benchmarl.json"
 TOLERANCE = 1e-5  # the pure actor against BenchMARL's policy, max abs difference of the actions
@@ -70,19 +72,6 @@ CHANGES: dict[str, tuple[Any, str]] = {
     "create_json": (False, "marl-eval json is written by evaluation, which is off"),
     "checkpoint_interval": (0, "no checkpoints: the actors are returned"),
 }
-
-
-@dataclass
-class PeerRun:
-    """What a run leaves: each role's deterministic actor (a plain torch module) and how it was trained."""
-
-    actors: dict[str, nn.Module]
-    steps: int
-    episodes: int
-    cpu_seconds: float
-    iterations: int
-    settings: dict[str, Any]
-    library: str
 
 
 class BudgetSpent(KeyboardInterrupt):

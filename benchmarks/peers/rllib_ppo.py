@@ -22,7 +22,6 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,8 @@ from torch import nn
 
 from pecli.game.pettingzoo_env import parallel_env
 from pecli.process import descendants
+
+from . import PeerRun
 
 AGENTS = ("pursuer", "evader")
 ACTION_DIM = 2
@@ -66,20 +67,6 @@ MODEL: dict[str, Any] = {
 REWARD_SCALE = 0.001  # rewards / 1000 for learning, as configs/paper.yaml's training.reward_scale
 RAY_INIT: dict[str, Any] = {"num_cpus": 1, "include_dashboard": False}
 CHECK_TOLERANCE = 1e-5
-
-
-@dataclass
-class PeerRun:
-    """What a library's training left: a pure torch actor per role and what it cost."""
-
-    actors: dict[str, nn.Module]
-    steps: int
-    episodes: int
-    cpu_seconds: float
-    iterations: int
-    settings: dict[str, Any]
-    library: str
-    curve: list[dict[str, Any]] = field(default_factory=list)
 
 
 class DeterministicActor(nn.Module):

@@ -612,8 +612,39 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     assert "| Greedy | **0.70**† / 0.34 (+0.36) | **0.70**† / 0.83 (−0.13) |" in text
     assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
+    assert "Best responses" not in text  # none measured yet
+
+    from pecli.exploit import ExploitRecord, Response
+
+    (run,) = kept
+    pursuer, evader = kept[run]["pursuer"][0], kept[run]["evader"][0]
+    for role, target, captures in (("pursuer", pursuer, 2), ("evader", evader, 9)):  # responses' captures of 10
+        folder = out / "exploit" / run / f"against-{role}"
+        folder.mkdir(parents=True)
+        response = Response(arm="fresh", seed=0, captures=captures, episodes=10, cpu_seconds=1, steps=5, checkpoint="")
+        record = ExploitRecord(
+            target=target, target_identity=target, role=role, scenario="quick", scenario_hash="h", cpu_minutes=20.0,
+            episodes=10, belief="none", responses={"fresh-s0": response},
+        )  # fmt: skip
+        atomic_write_json(folder / "exploit.json", record.model_dump(mode="json"))
+    atomic_write_json(out / "exploit" / run / "pair.json", {"captures": 7, "episodes": 10})
+    text = ExperimentReport(out).markdown()
+    row = f"| {run} | MADDPG | 0.700 | 0.200 [0.057, 0.510] | 0.900 [0.596, 0.982] | 0.700 ["
+    assert "## Best responses to each run's players" in text and row in text
     assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
+
+
+def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "none")])
+    assert result.exit_code == 1 and "holds no experiment" in result.output
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "experiment.yaml").write_text(yaml.safe_dump(SMOKE))
+    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out"), "--seeds", "0"])
+    assert result.exit_code == 1 and "--seeds" in result.output
+    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out")])
+    assert result.exit_code == 1 and "no players kept yet (kept.json)" in result.output
+    assert len(result.output.strip().splitlines()) == 1
 
 
 # -- on Ray ---------------------------------------------------------------------------------------------

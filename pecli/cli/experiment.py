@@ -1,5 +1,5 @@
-"""``pecli experiment run|show|status|report|compare``: a whole reproduction (train, rank, tournament, report) from one
-experiment file, executed on Ray."""
+"""``pecli experiment run|show|status|report|exploit|compare``: a whole reproduction (train, rank, tournament, report)
+from one experiment file, executed on Ray, and best responses to its players."""
 
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ from pecli.cli.common import (
     PlayersConfigOption,
     console,
     err_console,
+    require_batch,
+    require_positive,
     scenario_for,
     sigterm_stops,
     user_errors,
@@ -282,6 +284,52 @@ def report(
 
     paths = write_report(out)
     _print_report(out)
+    err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
+
+
+@app.command()
+@user_errors
+def exploit(
+    out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)],
+    cpu_minutes: Annotated[
+        float, typer.Option("--cpu-minutes", help="CPU-minutes each best response trains (its evaluations included).")
+    ] = 20.0,
+    seeds: Annotated[int, typer.Option("--seeds", help="Best responses per start and side (seeds 0 .. K-1).")] = 3,
+    warm: Annotated[
+        bool, typer.Option("--warm", help="Also warm-start each response from the run's own player of its role.")
+    ] = False,
+    episodes: Annotated[
+        int, typer.Option("--episodes", "-n", help="Held-out games each response plays against the player.")
+    ] = 500,
+) -> None:
+    """Best responses to every run's kept pursuer and evader, then the report again with each run's NashConv.
+
+    For each run, in turn: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
+    [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. Runs in this process, one response at a time; stopping
+    is safe and the same command continues.
+    """
+    from pecli.experiment.exploit import exploit_experiment
+    from pecli.experiment.report import write_report
+    from pecli.exploit import ExploitInterrupted
+
+    require_batch(episodes, "play fewer")
+    require_positive(seeds, "--seeds")
+    settings = {"cpu_minutes": cpu_minutes, "seeds": tuple(range(seeds)), "episodes": episodes}
+
+    def report(line: str) -> None:
+        err_console.print(line, highlight=False, markup=False)
+
+    try:
+        with sigterm_stops():  # a scheduler's time limit saves like Ctrl-C
+            exploit_experiment(out, report, warm=warm, **settings)
+    except ExploitInterrupted as stop:
+        err_console.print(
+            f"interrupted: {stop.name}'s state is kept in {stop.folder}; run the same command to continue",
+            highlight=False,
+            markup=False,
+        )
+        raise typer.Exit(code=130) from None
+    paths = write_report(out)
     err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 
 

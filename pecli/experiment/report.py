@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from pecli.errors import PecliError
+from pecli.experiment.exploit import recorded_pairs
 from pecli.experiment.folder import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
@@ -308,6 +309,7 @@ class ExperimentReport:
                 f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
                 f"{r['stderr']:.0f} | {'-' if value is None else f'{value:.2f}'} |"
             )
+        lines += self._exploit_lines()
         lines += ["", "![capture rate per cell](table.png)", ""]
         return "\n".join(lines)
 
@@ -330,6 +332,57 @@ class ExperimentReport:
             low, high = row["interval"]
             lines.append(
                 f"| {row['group']} | {row['role']} | {row['players']} | {row['iqm']:.3f} | [{low:.3f}, {high:.3f}] |"
+            )
+        return lines
+
+    def best_responses(self) -> list[dict[str, Any]]:
+        """Each run whose kept pair has best responses (``pecli experiment exploit``): the pair's own capture
+        rate, the strongest responses' and NashConv, each with its 95 % interval."""
+        rows = []
+        for run, pair in recorded_pairs(self.out).items():
+            best_evader, best_pursuer = pair.against_pursuer.strongest(), pair.against_evader.strongest()
+            rows.append(
+                {
+                    "run": run,
+                    "group": self.group_of_spec.get(pair.pursuer, ""),
+                    "pair_capture_rate": pair.capture_rate,
+                    "best_evader_holds_pursuer_to": best_evader.capture_rate,
+                    "best_evader_interval": list(best_evader.interval),
+                    "best_pursuer_catches_evader": best_pursuer.capture_rate,
+                    "best_pursuer_interval": list(best_pursuer.interval),
+                    "nash_conv": pair.nash_conv,
+                    "nash_conv_interval": list(pair.interval),
+                    "responses": len(pair.against_pursuer.responses) + len(pair.against_evader.responses),
+                    "cpu_minutes": pair.against_pursuer.cpu_minutes,
+                }
+            )
+        return rows
+
+    def _exploit_lines(self) -> list[str]:
+        rows = self.best_responses()
+        if not rows:
+            return []
+        lines = [
+            "",
+            "## Best responses to each run's players",
+            "",
+            "Each run's kept pursuer and evader against best responses trained on each alone "
+            f"(`pecli experiment exploit`, {rows[0]['cpu_minutes']:g} CPU-minutes each); the strongest response "
+            "counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): 0 for an "
+            "equilibrium. 95 % intervals over the held-out games.",
+            "",
+            "| run | group | the pair | best evader holds the pursuer to | best pursuer catches the evader | "
+            "NashConv | responses |",
+            "| --- | --- | ---: | --- | --- | --- | ---: |",
+        ]
+        for r in rows:
+            (e_low, e_high), (p_low, p_high) = r["best_evader_interval"], r["best_pursuer_interval"]
+            n_low, n_high = r["nash_conv_interval"]
+            lines.append(
+                f"| {r['run']} | {r['group']} | {r['pair_capture_rate']:.3f} | "
+                f"{r['best_evader_holds_pursuer_to']:.3f} [{e_low:.3f}, {e_high:.3f}] | "
+                f"{r['best_pursuer_catches_evader']:.3f} [{p_low:.3f}, {p_high:.3f}] | "
+                f"{r['nash_conv']:.3f} [{n_low:.3f}, {n_high:.3f}] | {r['responses']} |"
             )
         return lines
 
@@ -373,6 +426,7 @@ class ExperimentReport:
             "cells": [c.to_dict() for c in self.cells],
             "group_ratings": [{**asdict(r), "name": group, "role": role} for group, role, r in self.group_ratings()],
             "group_intervals": self.kind_intervals(),
+            "best_responses": self.best_responses(),
             "ratings": [
                 {**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
                 for r in self.data["ratings"]

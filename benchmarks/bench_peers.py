@@ -79,6 +79,23 @@ def plain(scenario: str, steps: int) -> Callable[[], int]:
     return block
 
 
+def batched(scenario: str, steps: int, n: int = 256) -> Callable[[], int]:
+    """pecli's batched ``Game`` of ``n`` games with random actions (finished games restart): game-steps."""
+    from pecli.game import Game
+
+    game = Game(load_scenario(scenario), n=n, seed=0, auto_reset=True)
+    rng = np.random.default_rng(0)
+    actions = [(rng.uniform(-1, 1, (n, 2)), rng.uniform(-1, 1, (n, 2))) for _ in range(16)]
+    rounds = max(1, steps // n)
+
+    def block() -> int:
+        for i in range(rounds):
+            game.step(*actions[i % 16])
+        return rounds * n
+
+    return block
+
+
 def rllib(scenario: str, steps: int, random_actions: bool) -> Callable[[], int]:
     """RLlib's ``MultiAgentEnvRunner.sample``: random actions, or one untrained PPO module per agent."""
     from ray.rllib.algorithms.ppo import PPOConfig
@@ -153,6 +170,7 @@ def envs(args: argparse.Namespace) -> None:
     n = {key: max(50, int(value * scale)) for key, value in {"plain": 4000, "random": 2000, "module": 1000}.items()}
     loops: list[tuple[str, Callable[[], Callable[[], int]]]] = [
         ("parallel_env, plain loop, random actions", lambda: plain(args.config, n["plain"])),
+        ("pecli Game, 256 games batched, random actions", lambda: batched(args.config, 100 * n["plain"])),
         ("RLlib MultiAgentEnvRunner.sample, random actions", lambda: rllib(args.config, n["random"], True)),
         ("RLlib MultiAgentEnvRunner.sample, untrained PPO modules", lambda: rllib(args.config, n["module"], False)),
         ("TorchRL PettingZooWrapper.rollout, random actions", lambda: torchrl_rollout(args.config, n["random"])),
@@ -176,7 +194,8 @@ def envs(args: argparse.Namespace) -> None:
     print("| sampling loop | env-steps per CPU-second | CPU per env-step | the env's share |")
     print("| --- | ---: | ---: | ---: |")
     for name, value in results.items():
-        share = f"{100 * value / reference:.1f} %" if reference else "-"  # the plain loop's time over this loop's
+        library = not name.startswith("pecli Game")  # the batched game is no sampling loop
+        share = f"{100 * value / reference:.1f} %" if reference and library else "-"  # the plain loop/this loop
         print(f"| {name} | {value:,.0f} | {1e6 / value:,.0f} us | {share} |")
 
 

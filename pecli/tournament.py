@@ -603,10 +603,13 @@ def run_tournament(
         )
 
 
+PLAYER_FILES = (".zip", ".onnx", ".npz")  # checkpoints, exported models, HJ solutions
+
+
 def player_spec(policy: str | Path) -> str:
-    """How a tournament names a player's ``spec``: a checkpoint (``.zip``) by its resolved path, anything else as
-    given (a policy string such as ``greedy`` or ``hj:model=rel4d``)."""
-    return str(Path(policy).resolve()) if str(policy).endswith(".zip") else str(policy)
+    """How a tournament names a player's ``spec``: a player file (a checkpoint ``.zip``, an exported ``.onnx``, an
+    HJ ``.npz``) by its resolved path, anything else as given (a policy string such as ``greedy``)."""
+    return str(Path(policy).resolve()) if str(policy).lower().endswith(PLAYER_FILES) else str(policy)
 
 
 def pairing_results(
@@ -624,9 +627,14 @@ def pairing_results(
     The games are a :func:`run_tournament` cached in ``out`` (a second call plays only new pairings).
     Returns each pairing's result keyed by ``(player_spec(pursuer), player_spec(evader))``.
     """
-    found = find_players([str(p) for p in [*pursuers, *evaders]], scenario, baselines=True).players
+    discovery = find_players([str(p) for p in [*pursuers, *evaders]], scenario, baselines=True)
+    found = discovery.players
     wanted = {"pursuer": {player_spec(p) for p in pursuers}, "evader": {player_spec(e) for e in evaders}}
     players: dict[Role, list[Player]] = {role: [p for p in found[role] if p.spec in wanted[role]] for role in found}
+    missing = [(spec, role) for role in ROLES for spec in sorted(wanted[role] - {p.spec for p in players[role]})]
+    if missing:
+        why = f" ({discovery.skipped[0]})" if discovery.skipped else ""
+        raise PecliError(f"{missing[0][0]} cannot play {missing[0][1]} in {scenario.name}{why}")
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
     grid = run_tournament(scenario, players, pairings, episodes, seeds, out, workers, on_result).grid()
     return {(p.spec, e.spec): grid[(p.name, e.name)] for p, e in pairings}

@@ -9,13 +9,14 @@ import pytest
 import torch as th
 from torch import nn
 
-from pecli.errors import ExportError
+from pecli.errors import ExportError, PecliError
 from pecli.export.network import NetworkPolicy, export_network
 from pecli.game.pettingzoo_env import parallel_env
 from pecli.match import play_match
 from pecli.policies.registry import resolve_policy
 from pecli.runtime import read_sidecar
 from pecli.scenario import Scenario
+from pecli.tournament import pairing_results, player_spec
 
 pytest.importorskip("onnxruntime")
 
@@ -82,3 +83,13 @@ def test_a_network_with_nan_weights_is_refused(quick: Scenario, tmp_path: Path) 
         network[0].weight[0, 0] = float("nan")
     with pytest.raises(ExportError, match="NaN or infinite"):
         export_network(network, "pursuer", quick, tmp_path / "x.onnx", algo="mlp")
+
+
+def test_an_exported_network_joins_pairing_results_by_its_path(quick: Scenario, tmp_path: Path, monkeypatch) -> None:
+    network = actor(parallel_env(quick).observation_space("pursuer").shape[0], seed=4)
+    export_network(network, "pursuer", quick, tmp_path / "peer" / "pursuer.onnx", algo="mlp")
+    monkeypatch.chdir(tmp_path)
+    results = pairing_results(quick, ["peer/pursuer.onnx"], ["greedy"], 4, [0], tmp_path / "t")
+    assert set(results) == {(player_spec("peer/pursuer.onnx"), "greedy")}
+    with pytest.raises(PecliError, match="peer/pursuer.onnx cannot play evader in quick"):
+        pairing_results(quick, ["pure-pursuit"], ["peer/pursuer.onnx"], 4, [0], tmp_path / "t")  # no evader

@@ -249,7 +249,7 @@ def match(args: argparse.Namespace) -> None:
     scenario = load_scenario(args.config)
     teams: dict[str, list[dict[str, str]]] = {"pecli": [pecli_players(run) for run in args.pecli]}
     for peer in PEERS:
-        runs = sorted(args.zoo.glob(f"{peer}-s*/pursuer.onnx"))
+        runs = sorted(args.zoo.glob(f"{peer}-s*/pursuer.onnx"), key=lambda r: int(r.parent.name.rsplit("-s", 1)[1]))
         if runs:
             teams[peer] = [{role: str(r.parent / f"{role}.onnx") for role in ("pursuer", "evader")} for r in runs]
     fixed_evaders = [*HEURISTIC_EVADERS, *ADVERSARIES]

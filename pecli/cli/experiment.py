@@ -22,6 +22,7 @@ from pecli.cli.common import (
     sigterm_stops,
     user_errors,
 )
+from pecli.cli.exploit import responses_stop
 from pecli.locks import locked
 from pecli.scenario import builtin_experiments
 
@@ -310,7 +311,6 @@ def exploit(
     """
     from pecli.experiment.exploit import exploit_experiment
     from pecli.experiment.report import write_report
-    from pecli.exploit import ExploitInterrupted
 
     require_batch(episodes, "play fewer")
     require_positive(seeds, "--seeds")
@@ -319,16 +319,8 @@ def exploit(
     def report(line: str) -> None:
         err_console.print(line, highlight=False, markup=False)
 
-    try:
-        with sigterm_stops():  # a scheduler's time limit saves like Ctrl-C
-            exploit_experiment(out, report, warm=warm, **settings)
-    except ExploitInterrupted as stop:
-        err_console.print(
-            f"interrupted: {stop.name}'s state is kept in {stop.folder}; run the same command to continue",
-            highlight=False,
-            markup=False,
-        )
-        raise typer.Exit(code=130) from None
+    with responses_stop():
+        exploit_experiment(out, report, warm=warm, **settings)
     paths = write_report(out)
     err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 

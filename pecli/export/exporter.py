@@ -69,16 +69,15 @@ def require_finite(learned: LearnedPolicy, checkpoint: Path) -> None:
         )
 
 
-def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[PolicyGraph, bytes]:
-    """The checkpoint's graph traced to ONNX, validated by ``onnx.checker`` and labelled."""
+def checked_onnx(graph: PolicyGraph, example: dict[str, th.Tensor], opset: int, description: str) -> bytes:
+    """``graph`` traced to ONNX, validated by ``onnx.checker`` and labelled with ``description``."""
     try:
         import onnx
     except ImportError:
         raise ExportError("pecli export needs onnx and onnxruntime: pip install 'pecli[export]'") from None
 
-    graph = PolicyGraph(learned.actor, layout)
     try:
-        data = to_onnx(graph, example_inputs(layout, learned), opset)
+        data = to_onnx(graph, example, opset)
     except Exception as exc:  # an opset the exporter does not support, an operator it cannot write
         raise ExportError(f"cannot export to ONNX opset {opset}: {type(exc).__name__}: {exc}") from None
     model = onnx.load_from_string(data)
@@ -87,11 +86,25 @@ def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[Po
     except (onnx.checker.ValidationError, onnx.shape_inference.InferenceError) as exc:
         raise ExportError(f"the exported graph fails onnx.checker: {exc}") from None
     model.producer_name, model.producer_version = "pecli", __version__
-    model.doc_string = (
-        f"pecli {learned.role} ({learned.meta.belief} belief): SI state estimates in, "
-        "SI command out; see the sidecar .onnx.json"
-    )
-    return graph, model.SerializeToString()
+    model.doc_string = f"{description}: SI state estimates in, SI command out; see the sidecar .onnx.json"
+    return model.SerializeToString()
+
+
+def onnx_bytes(learned: LearnedPolicy, layout: SILayout, opset: int) -> tuple[PolicyGraph, bytes]:
+    """The checkpoint's graph traced to ONNX, validated by ``onnx.checker`` and labelled."""
+    graph = PolicyGraph(learned.actor, layout)
+    description = f"pecli {learned.role} ({learned.meta.belief} belief)"
+    return graph, checked_onnx(graph, example_inputs(layout, learned), opset, description)
+
+
+def write_export(out: Path, data: bytes, sidecar: dict[str, Any], parity: ParityReport) -> ExportResult:
+    """Write the model, then its sidecar with the model's hash and the parity report, each atomically."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out) as tmp:
+        tmp.write_bytes(data)
+    sidecar.update(model_sha256=hashlib.sha256(data).hexdigest(), parity=parity.to_dict())
+    atomic_write_json(sidecar_path(out), sidecar)
+    return ExportResult(model=out, sidecar=sidecar_path(out), size=len(data), parity=parity)
 
 
 def export_checkpoint(
@@ -130,11 +143,7 @@ def export_checkpoint(
     report = check_parity(exported, learned, scenario, episodes, seed)
     if not report.passed:
         raise ExportError(f"parity check failed against the checkpoint: {report.failure()}; nothing written")
-    with atomic_path(out) as tmp:
-        tmp.write_bytes(data)
-    sidecar.update(model_sha256=hashlib.sha256(data).hexdigest(), parity=report.to_dict())
-    atomic_write_json(sidecar_path(out), sidecar)
-    return ExportResult(model=out, sidecar=sidecar_path(out), size=len(data), parity=report)
+    return write_export(out, data, sidecar, report)
 
 
 def check_export(

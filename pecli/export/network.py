@@ -13,23 +13,22 @@ it writes the same ONNX graph and sidecar as ``pecli export onnx``, so the playe
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 import torch as th
 from torch import nn
 
+from pecli import __version__
 from pecli.errors import ExportError
 from pecli.export.check import check_parity
-from pecli.export.exporter import ExportResult
-from pecli.export.graph import DEFAULT_OPSET, MIN_OPSET, PolicyGraph, max_opset, to_onnx
+from pecli.export.exporter import ExportResult, checked_onnx, write_export
+from pecli.export.graph import DEFAULT_OPSET, MIN_OPSET, PolicyGraph, max_opset
 from pecli.export.sidecar import build_sidecar
 from pecli.game.si import SILayout
-from pecli.io import atomic_path, atomic_write_json
 from pecli.policies.exported import ExportedPolicy
 from pecli.roles import Role
-from pecli.runtime import ExportedModel, sidecar_path
+from pecli.runtime import ExportedModel
 from pecli.scenario import Scenario
 from pecli.zoo import CheckpointMeta
 
@@ -119,16 +118,12 @@ def export_network(
     network = network.eval()
     _check_network(network, layout)
     graph = PolicyGraph.of_network(network, layout)
-    data = to_onnx(graph, {"obs": th.zeros((2, 1, layout.dim), dtype=th.float64)}, opset)
+    example = {"obs": th.zeros((2, 1, layout.dim), dtype=th.float64)}
+    data = checked_onnx(graph, example, opset, f"a {role} trained elsewhere ({algo}, pecli {__version__})")
     meta = network_meta(role, scenario, algo, run, seed, steps, episodes, opponent)
     sidecar = build_sidecar(graph, scenario, meta, None, opset, draws=0)
     exported = ExportedPolicy(ExportedModel.from_bytes(data, sidecar, source=str(out)), scenario)
     report = check_parity(exported, NetworkPolicy(network, role), scenario, episodes_checked, seed)
     if not report.passed:
         raise ExportError(f"parity check failed against the network: {report.failure()}; nothing written")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out) as tmp:
-        tmp.write_bytes(data)
-    sidecar.update(model_sha256=hashlib.sha256(data).hexdigest(), parity=report.to_dict())
-    atomic_write_json(sidecar_path(out), sidecar)
-    return ExportResult(model=out, sidecar=sidecar_path(out), size=len(data), parity=report)
+    return write_export(out, data, sidecar, report)

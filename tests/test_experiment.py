@@ -585,12 +585,14 @@ def test_handed_over_players_are_each_runs_averages(tmp_path: Path) -> None:
         handed_over(runs, tmp_path)
 
 
-def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the_papers(tmp_path: Path) -> None:
-    from pecli.experiment.report import ExperimentReport
+def handed_over_tournament(tmp_path: Path, seeds: list[int]) -> tuple[Path, dict]:
+    """An experiment folder of one league schedule whose handed-over players (and the paper's pure pursuit and
+    greedy) played a tournament in which every pairing caught 7 of 10; and its ``kept.json``."""
     from pecli.io import atomic_write_json
     from pecli.tournament import PairingResult, Player, TournamentResults, rate
 
-    data = {**SMOKE, "runs": {**SMOKE["runs"], "schedules": ["league"]}, "ranking": {"players": "handed-over"}}
+    runs = {**SMOKE["runs"], "schedules": ["league"], "seeds": seeds}
+    data = {**SMOKE, "runs": runs, "ranking": {"players": "handed-over"}}
     experiment = experiment_from_dict(data, "exp.yaml")
     out = tmp_path / "out"
     (out / "tournament").mkdir(parents=True)
@@ -606,6 +608,13 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     results = TournamentResults(experiment.scenario, players, pairings, rate(players, pairings), 10, [0])
     atomic_write_json(out / "tournament" / "results.json", results.to_json())
     atomic_write_json(out / "kept.json", kept)
+    return out, kept
+
+
+def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the_papers(tmp_path: Path) -> None:
+    from pecli.experiment.report import ExperimentReport
+
+    out, kept = handed_over_tournament(tmp_path, [0])
     text = ExperimentReport(out).markdown()
     assert "Players: each run's handed-over average.zip" in text and "Ranking:" not in text
     assert "| evader \\ pursuer | Pure Pursuit | MADDPG |" in text  # not "MADDPG (league)": the paper's kind
@@ -614,25 +623,43 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
     assert "Best responses" not in text  # none measured yet
 
-    from pecli.exploit import ExploitRecord, Response
-
     (run,) = kept
-    pursuer, evader = kept[run]["pursuer"][0], kept[run]["evader"][0]
-    for role, target, captures in (("pursuer", pursuer, 2), ("evader", evader, 9)):  # responses' captures of 10
-        folder = out / "exploit" / run / f"against-{role}"
-        folder.mkdir(parents=True)
-        response = Response(arm="fresh", seed=0, captures=captures, episodes=10, cpu_seconds=1, steps=5, checkpoint="")
-        record = ExploitRecord(
-            target=target, target_identity=target, role=role, scenario="quick", scenario_hash="h", cpu_minutes=20.0,
-            episodes=10, belief="none", responses={"fresh-s0": response},
-        )  # fmt: skip
-        atomic_write_json(folder / "exploit.json", record.model_dump(mode="json"))
-    atomic_write_json(out / "exploit" / run / "pair.json", {"captures": 7, "episodes": 10})
+    measured(out / "exploit" / run, kept[run]["pursuer"][0], kept[run]["evader"][0])
     text = ExperimentReport(out).markdown()
     row = f"| {run} | MADDPG | 0.700 | 0.200 [0.057, 0.510] | 0.900 [0.596, 0.982] | 0.700 ["
     assert "## Best responses to each run's players" in text and row in text
     assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
+
+
+def measured(folder: Path, pursuer: str, evader: str) -> None:
+    """Records of best responses to a pair, as `pecli exploit --pair` writes them: responses catch 2 and 9 of 10,
+    the pair itself 7 of 10."""
+    from pecli.exploit import ExploitRecord, Response
+    from pecli.io import atomic_write_json
+
+    for role, target, captures in (("pursuer", pursuer, 2), ("evader", evader, 9)):
+        response = Response(arm="fresh", seed=0, captures=captures, episodes=10, cpu_seconds=1, steps=5, checkpoint="")
+        record = ExploitRecord(
+            target=target, target_identity=target, role=role, scenario="quick", scenario_hash="h", cpu_minutes=20.0,
+            episodes=10, belief="none", responses={"fresh-s0": response},
+        )  # fmt: skip
+        atomic_write_json(folder / f"against-{role}" / "exploit.json", record.model_dump(mode="json"))
+    atomic_write_json(folder / "pair.json", {"captures": 7, "episodes": 10})
+
+
+def test_a_groups_seeds_are_measured_as_one_mixed_pair(tmp_path: Path) -> None:
+    from pecli.experiment.exploit import mixed_pairs, recorded_pairs
+    from pecli.experiment.report import ExperimentReport
+
+    out, _ = handed_over_tournament(tmp_path, [0, 1])
+    pursuers, evaders = mixed_pairs(out)["none-league-mixed"]
+    assert pursuers == "mix:zoo/none-league-s0/pursuer/average.zip,zoo/none-league-s1/pursuer/average.zip"
+    assert evaders == "mix:zoo/none-league-s0/evader/average.zip,zoo/none-league-s1/evader/average.zip"
+    measured(out / "exploit" / "none-league-mixed", pursuers, evaders)
+    assert list(recorded_pairs(out)) == ["none-league-mixed"]  # no run's own pair measured yet
+    (row,) = ExperimentReport(out).best_responses()
+    assert (row["run"], row["group"], row["nash_conv"]) == ("none-league-mixed", "MADDPG", pytest.approx(0.7))
 
 
 def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> None:

@@ -189,6 +189,46 @@ def test_a_tiny_self_play_writes_rounds_with_their_lineage(finished: tuple[Path,
     assert [(t.round, t.role) for t in state.turns] == [(1, "pursuer"), (1, "evader"), (2, "pursuer"), (2, "evader")]
 
 
+def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quick: Scenario, tmp_path: Path) -> None:
+    from pecli.policies import resolve_policy, stored_scenario
+
+    run, _ = finished
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    mixture = resolve_policy(f"mix:{run},{other}", "pursuer", quick, seed=0)
+    assert isinstance(mixture, MixedPolicy) and mixture.names == [str(run), str(other)]
+    assert mixture.weights.tolist() == [0.5, 0.5]
+    swapped = resolve_policy(f"mix:{other} , {run}", "pursuer", quick, seed=0)
+    assert swapped.identity == mixture.identity  # a tournament's cache knows the mixture by its members' content
+    assert stored_scenario(f"mix:{run},{other}").fingerprint() == quick.fingerprint()
+    played = invoke("play", "-p", f"mix:{run},{other}", "-e", f"mix:{run}/evader/average.zip,greedy", "-n", "8")
+    assert played.exit_code == 0, played.output
+
+
+@pytest.mark.parametrize(
+    "members, message",
+    [
+        ("", "separated by commas"),
+        ("{run},", "separated by commas"),
+        ("{run},{run}", "twice"),
+        ("{run},nash:x", "does not nest"),
+        ("{run}/..", "cannot play pursuer"),
+        ("{run}/pursuer/nothere.zip", "not there"),
+        ("{run},os:system", "imports no code"),
+        ("{run},greedy", "plays evader"),
+    ],
+)
+def test_a_bad_mixture_is_refused_in_one_line(
+    finished: tuple[Path, list[str]], quick: Scenario, members: str, message: str
+) -> None:
+    from pecli.errors import PolicyError
+    from pecli.policies import resolve_policy
+
+    run, _ = finished
+    with pytest.raises(PolicyError, match=message):
+        resolve_policy("mix:" + members.format(run=run), "pursuer", quick, seed=0)
+
+
 def parameters(path: Path) -> th.Tensor:
     from stable_baselines3 import TD3
 

@@ -25,6 +25,7 @@ from pecli.cli.common import (
 from pecli.cli.exploit import responses_stop
 from pecli.locks import locked
 from pecli.scenario import builtin_experiments
+from pecli.text import plural
 
 if TYPE_CHECKING:
     from pecli.experiment.folder import RunStatus
@@ -187,9 +188,9 @@ def run(
             live.start()
         with cluster:
             where = (
-                f"embedded Ray, {cluster.total_cpus()} CPUs"
+                f"embedded Ray, {plural(cluster.total_cpus(), 'CPU')}"
                 if cluster.embedded
-                else f"Ray cluster {address}: {cluster.nodes()} nodes, {cluster.total_cpus()} CPUs"
+                else f"Ray cluster {address}: {plural(cluster.nodes(), 'node')}, {plural(cluster.total_cpus(), 'CPU')}"
             )
             err_console.print(
                 f"experiment [bold]{loaded.name}[/]: {len(runner.rows)} runs on {where}; output in {out}",
@@ -302,12 +303,21 @@ def exploit(
     episodes: Annotated[
         int, typer.Option("--episodes", "-n", help="Held-out games each response plays against the player.")
     ] = 500,
+    mixtures: Annotated[
+        bool,
+        typer.Option(
+            "--mixtures",
+            help="Also each group's seeds as one pair of uniform mixtures (mix:...), into OUT/exploit/GROUP-mixed.",
+        ),
+    ] = False,
 ) -> None:
     """Best responses to every run's kept pursuer and evader, then the report again with each run's NashConv.
 
     For each run, in turn: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
-    [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. Runs in this process, one response at a time; stopping
-    is safe and the same command continues.
+    [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. With [bold]--mixtures[/], then each group's seeds
+    played as one mixed player (each game one seed's, drawn uniformly): a population is much harder to exploit
+    than any of its members. Runs in this process, one response at a time; stopping is safe and the same command
+    continues.
     """
     from pecli.experiment.exploit import exploit_experiment
     from pecli.experiment.report import write_report
@@ -320,7 +330,7 @@ def exploit(
         err_console.print(line, highlight=False, markup=False)
 
     with responses_stop():
-        exploit_experiment(out, report, warm=warm, **settings)
+        exploit_experiment(out, report, warm=warm, mixtures=mixtures, **settings)
     paths = write_report(out)
     err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 

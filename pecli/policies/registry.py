@@ -8,7 +8,8 @@ A policy string is one of:
 * a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
   ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`), ``nash``
   (``nash:FOLDER``: the Nash mixture of a zoo that ``pecli tournament --nash`` wrote, see
-  :mod:`pecli.policies.nash`);
+  :mod:`pecli.policies.nash`), ``mix`` (``mix:A,B,C``: players or self-play runs as one uniform mixture, see
+  :mod:`pecli.policies.mix`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
   take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
 * a file path, loaded by the loader registered for its suffix: ``.zip`` checkpoints, ``.onnx``
@@ -109,10 +110,34 @@ def _nash_member(spec: str, folder: Path) -> str:
     return spec
 
 
+def _load_mix(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    from pecli.policies.mix import load_mix_policy  # several players as one (uniform)
+
+    def member(spec: str) -> Policy:
+        return resolve_policy(_mix_member(spec), role, scenario, seed=seed)
+
+    return load_mix_policy(options, role, scenario, member)
+
+
+def _mix_member(spec: str) -> str:
+    """A ``mix:`` member's policy string: a built-in or a policy file; code (``module:Class``) only with
+    ``--trust``, as a record may name a mixture."""
+    from pecli.trust import trusted
+
+    if spec in BUILTINS or Path(spec).suffix.lower() in _LOADERS:
+        return spec
+    if ":" in spec and not trusted():
+        raise PolicyError(
+            f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
+            "no code a file names unless you pass `pecli --trust`"
+        )
+    return spec
+
+
 _LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported, ".npz": _load_hj_file}
 
 Family = Callable[[str, Role, Scenario, "int | None"], Policy]
-_FAMILIES: dict[str, Family] = {"hj": _load_hj, "nash": _load_nash}
+_FAMILIES: dict[str, Family] = {"hj": _load_hj, "nash": _load_nash, "mix": _load_mix}
 
 
 def register_loader(suffix: str, loader: Loader) -> None:
@@ -201,6 +226,11 @@ def stored_scenario(spec: str) -> Scenario | None:
     """The scenario a policy file records, if it records one readably: an export's sidecar, or a
     checkpoint's run ``config.yaml`` (``<run>/<role>/<name>.zip``) when its game is the one the
     checkpoint learned. ``None`` otherwise: loading the file then reports what is wrong with it."""
+    if family_of(spec) == "mix":  # the first member that records one
+        from pecli.policies.mix import recorded_files
+
+        found = (stored_scenario(str(file)) for file in recorded_files(spec.strip().partition(":")[2]))
+        return next((scenario for scenario in found if scenario is not None), None)
     path = Path(spec.strip())
     suffix = path.suffix.lower()
     try:

@@ -9,6 +9,9 @@ and ``onnxruntime`` besides this package (``pip install --no-deps pecli`` works)
     >>> command = controller.step(own_state, opponent_state) # once per control tick (10 Hz)
     >>> steering_velocity, acceleration = command            # rad/s and m/s^2 for a car
 
+:class:`MixedController` plays several exports as one (``mix:`` in simulation): each game one of them, drawn
+uniformly at ``reset()``.
+
 :class:`ExportedModel` is the graph with its sidecar, batched and stateless. :class:`Controller` is
 one player on one robot: it keeps the frame stack and the history window, decides every
 ``frame_skip`` ticks and holds its command in between, exactly as :mod:`pecli.game.memory` and
@@ -20,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -320,6 +324,56 @@ class Controller:
             normal = self.rng.standard_normal((1, m.draws, 2), dtype=np.float32)
         history = self.window()[None] if m.has_history else None
         return m.run(self.stack[None], history, uniform, normal)
+
+
+class MixedController:
+    """Several exported players as one on a robot: each game draws one member uniformly at :meth:`reset`, and that
+    member plays the whole game (the runtime form of the policy string ``mix:``).
+
+    Args:
+        controllers: the members, every one playing the same role of the same game.
+        seed: seed of the draws (each member keeps its own random numbers for a mixed belief).
+    """
+
+    def __init__(self, controllers: Sequence[Controller], seed: int | None = None) -> None:
+        if not controllers:
+            raise ExportError("a mixture needs at least one exported player")
+        first = controllers[0].model
+        for controller in controllers[1:]:
+            other = controller.model
+            if (other.role, other.scenario_fingerprint) != (first.role, first.scenario_fingerprint):
+                raise ExportError(
+                    f"every member must play one role of one game: {first.role} of '{first.scenario_name}' and "
+                    f"{other.role} of '{other.scenario_name}'"
+                )
+        self.controllers = list(controllers)
+        self.rng = np.random.default_rng(seed)
+        self.member = 0
+        self.reset()
+
+    @classmethod
+    def load(cls, paths: Sequence[str | Path], seed: int | None = None, threads: int = 1) -> MixedController:
+        """A mixture of the exported models at ``paths`` (each with its sidecar beside it)."""
+        members = np.random.default_rng(seed).integers(0, 2**31, size=len(paths)).tolist()
+        return cls([Controller.load(path, int(s), threads) for path, s in zip(paths, members)], seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start a new game: draw the member that plays it, and reset that member."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self.member = int(self.rng.integers(len(self.controllers)))
+        self.controllers[self.member].reset()
+
+    @property
+    def playing(self) -> Controller:
+        """The member playing this game."""
+        return self.controllers[self.member]
+
+    def step(
+        self, own: np.ndarray, opponent: np.ndarray | None = None, seen: bool | None = None, time: float | None = None
+    ) -> np.ndarray:
+        """The playing member's command for this tick (:meth:`Controller.step`)."""
+        return self.playing.step(own, opponent, seen, time)
 
 
 def _vector(values: Any, size: int, what: str) -> np.ndarray:

@@ -611,6 +611,24 @@ def test_the_runtime_refuses_a_time_that_is_not_a_number(exports) -> None:
         controller.step(np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0]), seen=True, time=float("nan"))
 
 
+def test_a_mixed_controller_plays_each_game_by_one_member(exports) -> None:
+    from pecli.runtime import MixedController
+
+    models = [exports["none"][1], exports["bimdn"][1]]
+    mixture = MixedController.load(models, seed=3)
+    own, opponent = np.zeros(5), np.array([1.0, 1.0, 0.0, 0.0])
+    drawn = set()
+    for _game in range(12):
+        mixture.reset()
+        drawn.add(mixture.member)
+        alone = Controller.load(models[mixture.member])  # the member alone, from the same start
+        for _ in range(3):
+            assert np.array_equal(mixture.step(own, opponent), alone.step(own, opponent))
+    assert drawn == {0, 1}
+    with pytest.raises(ExportError, match="one role of one game"):
+        MixedController.load([exports["none"][1], exports["evader"][1]])
+
+
 @pytest.mark.parametrize("key, value", [("history_length", 10**12), ("frame_stack", 10**9), ("dt_s", 1e300)])
 def test_a_sidecar_claiming_a_huge_window_is_refused_before_allocating(
     exports, tmp_path: Path, key: str, value: float

@@ -600,6 +600,23 @@ def test_a_record_naming_a_file_that_is_not_there_imports_nothing(tmp_path: Path
     assert resolve_policy(f"nash:{tmp_path}", "evader", quick).names == ["e"]
 
 
+def test_a_record_naming_a_mixture_follows_no_member_out_of_its_folder(tmp_path: Path) -> None:
+    from pecli.errors import PolicyError
+    from pecli.policies.registry import recorded_policy
+
+    room, outside = tmp_path / "zoo", tmp_path / "elsewhere"
+    for folder in (room / "run", outside / "run"):
+        (folder / "pursuer").mkdir(parents=True)
+        (folder / "pursuer" / "average.zip").write_bytes(b"")
+    mixture = f"mix:greedy,{room / 'run'},{room / 'run' / 'pursuer' / 'average.zip'}"
+    assert recorded_policy(mixture, room, "a record") == mixture
+    for member in (outside / "run", outside / "run" / "pursuer" / "average.zip"):
+        with pytest.raises(PolicyError, match="outside"):
+            recorded_policy(f"mix:greedy,{member}", room, "a record")
+    with pytest.raises(PolicyError, match="imports no code"):
+        recorded_policy("mix:greedy,os:system", room, "a record")
+
+
 def test_a_record_that_is_not_a_regular_file_is_not_read(tmp_path: Path) -> None:
     import os
 

@@ -199,6 +199,18 @@ def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
     from pecli.trust import trusted
 
     spec = spec.strip()
+    if family_of(spec) == "mix":  # each member as if the record named it; a run folder as its handed-over files
+        from pecli.policies.mix import HANDED_OVER, mix_members
+
+        for member in mix_members(spec.partition(":")[2]):
+            folder = Path(member)
+            if folder.is_dir():
+                for role in ("pursuer", "evader"):
+                    if (folder / role / HANDED_OVER).is_file():
+                        recorded_policy(str(folder / role / HANDED_OVER), inside, source)
+            else:
+                recorded_policy(member, inside, source)
+        return spec
     if spec in BUILTINS or family_of(spec) is not None:
         return spec
     path = Path(spec)

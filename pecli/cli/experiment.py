@@ -315,7 +315,7 @@ def exploit(
 
     For each run, in turn: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
     [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. With [bold]--mixtures[/], then each group's seeds
-    played as one mixed player (each game one seed's, drawn uniformly): a population is much harder to exploit
+    played as one mixed player (each game one seed's, drawn uniformly): a population is harder to exploit
     than any of its members. Runs in this process, one response at a time; stopping is safe and the same command
     continues.
     """

@@ -4,7 +4,7 @@ A member is a built-in name, a policy file (``.zip``, ``.onnx``, ``.npz``) or a 
 stands for what the run hands over for the role asked (``<run>/<role>/average.zip``). So
 ``mix:runs/zoo/a,runs/zoo/b,runs/zoo/c`` plays the pursuers (or evaders) of three runs as one mixed strategy.
 
-A population of independently trained players is far harder to exploit than any one of them: a best response has
+A population of independently trained players is harder to exploit than any one of them: a best response has
 to beat every member with one behaviour, without knowing which it faces, and independent runs leave different
 holes (docs/benchmarks/exploitability.md). This is the uniform meta-strategy over a population; ``nash:FOLDER``
 (:mod:`pecli.policies.nash`) weighs the members by a meta-game instead.

@@ -50,6 +50,7 @@ from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
 FINAL = "final"
 LAST = "last"
 BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
+AVERAGE_FILE = "average.zip"  # per self-play main learner: the mean of its last rounds, what the run hands over
 JOB_FILE = "run.json"
 MAX_METADATA_BYTES = 16 << 20  # a checkpoint's .json: its opponents' records make it grow with a self-play pool
 RESUME_DIR = "resume"  # per role: the learner's durable state (pecli.rl.durable)

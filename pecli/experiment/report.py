@@ -22,7 +22,7 @@ from pecli.experiment.folder import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve
-from pecli.policies.registry import family_of
+from pecli.policies.mix import first_member
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.stats import Rating, interquartile_mean, stratified_bootstrap_interval, ties_with_best
@@ -345,7 +345,7 @@ class ExperimentReport:
             rows.append(
                 {
                     "run": run,
-                    "group": self.group_of_spec.get(_first_member(pair.pursuer), ""),
+                    "group": self.group_of_spec.get(first_member(pair.pursuer), ""),
                     "pair_capture_rate": pair.capture_rate,
                     "best_evader_holds_pursuer_to": best_evader.capture_rate,
                     "best_evader_interval": list(best_evader.interval),
@@ -442,15 +442,3 @@ def write_report(out: Path) -> list[Path]:
     atomic_write_text(out / "report.md", report.markdown())
     atomic_write_json(out / "report.json", report.to_json())
     return [out / "report.md", out / "report.json", heatmap(report.grouped_results(), out / "table.png")]
-
-
-def _first_member(spec: str) -> str:
-    """A player string itself, or a mixture's (``mix:``) first member: what tells its group."""
-    if family_of(spec) != "mix":
-        return spec
-    from pecli.policies.mix import mix_members
-
-    try:
-        return mix_members(spec.partition(":")[2])[0]
-    except PecliError:
-        return spec

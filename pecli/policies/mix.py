@@ -17,15 +17,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pecli.errors import PolicyError
-from pecli.roles import Role
+from pecli.roles import ROLES, Role
+from pecli.zoo import AVERAGE_FILE
 
 if TYPE_CHECKING:
     from pecli.policies.base import Policy
     from pecli.scenario import Scenario
 
 MAX_MEMBERS = 64
-HANDED_OVER = "average.zip"  # what a self-play run hands over per role
-POLICY_FILES = (".zip", ".onnx", ".npz")
 
 
 def mix_members(options: str) -> list[str]:
@@ -44,30 +43,45 @@ def mix_members(options: str) -> list[str]:
     return members
 
 
+def first_member(spec: str) -> str:
+    """A policy string itself, or a mixture's first member (what names its group, what a response starts from)."""
+    family, _, options = spec.strip().partition(":")
+    return mix_members(options)[0] if family == "mix" else spec
+
+
 def member_file(member: str, role: Role) -> Path | None:
-    """The policy file a member names for ``role``: a run folder's handed-over player or the file itself;
-    ``None`` for a name (a built-in, or what the registry resolves). :class:`PolicyError` for a folder that hands
-    over no player of ``role`` or a policy file that is not there."""
+    """The file a member plays ``role`` from: a run folder's handed-over player, or the member itself when it is
+    a file; ``None`` for a name (a built-in, ``module:Class``). :class:`PolicyError` for a folder that hands over
+    no player of ``role``."""
     path = Path(member)
     if path.is_dir():
-        handed = path / role / HANDED_OVER
+        handed = path / role / AVERAGE_FILE
         if not handed.is_file():
             raise PolicyError(
                 f"mix: {member} cannot play {role}: it is no self-play run that hands over one ({handed} is "
                 "missing); name a checkpoint instead"
             )
         return handed
-    if path.suffix.lower() in POLICY_FILES:
-        if not path.is_file():
-            raise PolicyError(f"mix: the policy file {member} is not there")
-        return path
-    return None
+    return path if path.is_file() else None
+
+
+def member_paths(options: str) -> list[Path]:
+    """What the members of ``mix:OPTIONS`` name, in order: a run folder's handed-over players that are there
+    (pursuer, then evader), any other member as it is written. :class:`PolicyError` for a malformed mixture."""
+    paths = []
+    for spec in mix_members(options):
+        path = Path(spec)
+        if path.is_dir():
+            paths += [path / role / AVERAGE_FILE for role in ROLES if (path / role / AVERAGE_FILE).is_file()]
+        else:
+            paths.append(path)
+    return paths
 
 
 def load_mix_policy(options: str, role: Role, scenario: Scenario, member: Callable[[str], Policy]) -> Policy:
     """The ``mix:`` family: ``role``'s uniform mixture of the players in ``options``.
 
-    ``member(spec)`` resolves one member's policy string (a built-in name or a file path).
+    ``member(spec)`` resolves one member's policy string (a built-in name, a file path, ``module:Class``).
     """
     from pecli.io import file_digest
     from pecli.policies.mixed import MixedPolicy
@@ -76,20 +90,6 @@ def load_mix_policy(options: str, role: Role, scenario: Scenario, member: Callab
     files = [member_file(spec, role) for spec in specs]
     policies = [member(str(file) if file is not None else spec) for spec, file in zip(specs, files)]
     mixture = MixedPolicy(role, policies, specs)
-    keys = sorted(file_digest(file) if file is not None else f"builtin:{spec}" for spec, file in zip(specs, files))
+    keys = sorted(file_digest(file) if file is not None else f"spec:{spec}" for spec, file in zip(specs, files))
     mixture.identity = "mix:" + ",".join(keys)  # what a tournament's cache knows it by: its members' content
     return mixture
-
-
-def recorded_files(options: str) -> list[Path]:
-    """The files that may record the members' scenario, in order: a run folder's handed-over players (pursuer,
-    then evader), a member file itself; none for a mixture that does not read."""
-    try:
-        specs = mix_members(options)
-    except PolicyError:
-        return []
-    files = []
-    for spec in specs:
-        path = Path(spec)
-        files += [path / role / HANDED_OVER for role in ("pursuer", "evader")] if path.is_dir() else [path]
-    return files

@@ -81,23 +81,24 @@ def _load_nash(options: str, role: Role, scenario: Scenario, seed: int | None) -
     )
 
     def member(spec: str, folder: Path) -> Policy:
-        return resolve_policy(_nash_member(spec, folder), role, scenario, seed=seed)
+        return resolve_policy(_mixture_member(spec, folder), role, scenario, seed=seed)
 
     return load_nash_policy(options, role, scenario, member)
 
 
-def _nash_member(spec: str, folder: Path) -> str:
-    """A member's policy string, a relative file read from ``folder``; refuses what a data file may not name."""
+def _mixture_member(spec: str, folder: Path) -> str:
+    """A mixture member's policy string (``nash:``, ``mix:``), a relative file read from ``folder``; refuses what
+    a data file may not name."""
     from pecli.trust import trusted
 
     if spec in BUILTINS:
         return spec
-    if family_of(spec) == "nash":
-        raise PolicyError(f"{spec}: a Nash mixture does not nest another")
+    if family_of(spec) in ("nash", "mix"):
+        raise PolicyError(f"{spec}: a mixture does not nest another")
     if family_of(spec) is not None:  # hj: an HJ player, whose solution is read as data
         return spec
     path = Path(spec)
-    if path.suffix.lower() in (".zip", ".onnx", ".npz"):
+    if path.suffix.lower() in _LOADERS:
         member = path if path.is_absolute() else folder / path
         if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
             raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
@@ -114,24 +115,9 @@ def _load_mix(options: str, role: Role, scenario: Scenario, seed: int | None) ->
     from pecli.policies.mix import load_mix_policy  # several players as one (uniform)
 
     def member(spec: str) -> Policy:
-        return resolve_policy(_mix_member(spec), role, scenario, seed=seed)
+        return resolve_policy(_mixture_member(spec, Path()), role, scenario, seed=seed)
 
     return load_mix_policy(options, role, scenario, member)
-
-
-def _mix_member(spec: str) -> str:
-    """A ``mix:`` member's policy string: a built-in or a policy file; code (``module:Class``) only with
-    ``--trust``, as a record may name a mixture."""
-    from pecli.trust import trusted
-
-    if spec in BUILTINS or Path(spec).suffix.lower() in _LOADERS:
-        return spec
-    if ":" in spec and not trusted():
-        raise PolicyError(
-            f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
-            "no code a file names unless you pass `pecli --trust`"
-        )
-    return spec
 
 
 _LOADERS: dict[str, Loader] = {".zip": _load_checkpoint, ".onnx": _load_exported, ".npz": _load_hj_file}
@@ -199,17 +185,11 @@ def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
     from pecli.trust import trusted
 
     spec = spec.strip()
-    if family_of(spec) == "mix":  # each member as if the record named it; a run folder as its handed-over files
-        from pecli.policies.mix import HANDED_OVER, mix_members
+    if family_of(spec) == "mix":  # each member as if the record named it (a run folder: its handed-over files)
+        from pecli.policies.mix import member_paths
 
-        for member in mix_members(spec.partition(":")[2]):
-            folder = Path(member)
-            if folder.is_dir():
-                for role in ("pursuer", "evader"):
-                    if (folder / role / HANDED_OVER).is_file():
-                        recorded_policy(str(folder / role / HANDED_OVER), inside, source)
-            else:
-                recorded_policy(member, inside, source)
+        for member in member_paths(spec.partition(":")[2]):
+            recorded_policy(str(member), inside, source)
         return spec
     if spec in BUILTINS or family_of(spec) is not None:
         return spec
@@ -239,10 +219,13 @@ def stored_scenario(spec: str) -> Scenario | None:
     checkpoint's run ``config.yaml`` (``<run>/<role>/<name>.zip``) when its game is the one the
     checkpoint learned. ``None`` otherwise: loading the file then reports what is wrong with it."""
     if family_of(spec) == "mix":  # the first member that records one
-        from pecli.policies.mix import recorded_files
+        from pecli.policies.mix import member_paths
 
-        found = (stored_scenario(str(file)) for file in recorded_files(spec.strip().partition(":")[2]))
-        return next((scenario for scenario in found if scenario is not None), None)
+        try:
+            paths = member_paths(spec.strip().partition(":")[2])
+        except PolicyError:
+            return None
+        return next((found for path in paths if (found := stored_scenario(str(path))) is not None), None)
     path = Path(spec.strip())
     suffix = path.suffix.lower()
     try:

@@ -14,13 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from pecli.rl.pool import MAIN
 from pecli.roles import ROLES, Role
-from pecli.zoo import ZooError, read_metadata
+from pecli.zoo import AVERAGE_FILE, ZooError, read_metadata
 
 if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
 STATE_FILE = "selfplay.json"  # a self-play run's state: its turns, pools and records
-AVERAGE_FILE = "average.zip"  # per main learner: the mean of its last rounds, what a run hands over
 
 Turns = Sequence[Mapping[str, Any]]
 

@@ -8,9 +8,11 @@
 transitions, with learning and belief fitting both active (warm-ups shortened), in one process
 on one torch thread, median of ``--repeats``.
 
-(a') runs ``pecli selfplay -c league --belief KIND --rounds 1`` for each kind (BiMDN kinds with
+(a') runs ``pecli selfplay -c league --belief KIND --rounds R`` for each kind (BiMDN kinds with
 ``--hidden`` units, 64 as the league recipe runs them), the warm-ups shortened so that learning and belief fitting
-both run, and reads each side's CPU seconds from the run's ``selfplay.json``.
+both run, and reads each side's CPU seconds from the run's ``selfplay.json``: per round on average and in the last
+round. From the second round on, each side also faces its opponent's earlier rounds, whose beliefs run at every
+step, so a league's cost per round grows with its pool; ``--rounds 6`` shows it.
 
 (b) collects history windows of a pure-pursuit pursuer against the random-walk, greedy and rash
 evaders (``--games`` per evader), fits the BiMDN and the image belief on them by NLL (paper
@@ -76,29 +78,35 @@ def speed(args: argparse.Namespace) -> None:
 def league(args: argparse.Namespace) -> None:
     warmups = ["learning_starts=1000", "belief_settings.warmup=1000"]
     seconds: dict[str, list[float]] = {kind: [] for kind in args.kinds}
+    last: dict[str, list[float]] = {kind: [] for kind in args.kinds}
     with tempfile.TemporaryDirectory(prefix="bench-belief-") as zoo:
         for repeat in range(args.repeats):
             for kind in args.kinds:
                 name = f"{kind}-{repeat}"
                 sets = [*warmups, *([f"belief_settings.hidden={args.hidden}"] if kind.startswith("bimdn") else [])]
-                command = [sys.executable, "-m", "pecli", "selfplay", "-c", "league", "--belief", kind, "--rounds", "1"]
+                command = [sys.executable, "-m", "pecli", "selfplay", "-c", "league", "--belief", kind]
+                command += ["--rounds", str(args.rounds)]
                 command += ["--steps-per-round", str(args.steps), "--zoo", zoo, "--name", name, "--quiet"]
                 command += [part for item in sets for part in ("--set", item)]
                 env = {**os.environ, "PYTHONPATH": str(ROOT)}
                 subprocess.run(command, check=True, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
                 turns = json.loads((Path(zoo) / name / "selfplay.json").read_text())["turns"]
-                seconds[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns))
-                print(f"{kind}: {seconds[kind][-1]:.1f} CPU-s", file=sys.stderr)
-    reference = statistics.median(seconds["none"]) if "none" in seconds else None
+                seconds[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns) / args.rounds)
+                last[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns[-2:]))  # one turn per side
+                print(f"{kind}: {seconds[kind][-1]:.1f} CPU-s per round, last {last[kind][-1]:.1f}", file=sys.stderr)
     print(
-        f"league: 1 self-play round, {args.steps} transitions per side, warm-ups 1 000, BiMDN {args.hidden} units, "
-        f"median of {args.repeats}"
+        f"league: {args.rounds} self-play round(s), {args.steps} transitions per side each, warm-ups 1 000, "
+        f"BiMDN {args.hidden} units, median of {args.repeats}"
     )
-    print("| belief | CPU s per round | vs none |")
-    print("| --- | ---: | ---: |")
-    for kind, values in seconds.items():
-        cpu = statistics.median(values)
-        print(f"| {kind} | {cpu:.1f} | {cpu / reference:.2f} |" if reference else f"| {kind} | {cpu:.1f} | - |")
+    print("| belief | CPU s per round | vs none | last round | vs none |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for kind in args.kinds:
+        cells = []
+        for measured in (seconds, last):
+            cpu = statistics.median(measured[kind])
+            reference = statistics.median(measured["none"]) if "none" in measured else None
+            cells += [f"{cpu:.1f}", f"{cpu / reference:.2f}" if reference else "-"]
+        print(f"| {kind} | {' | '.join(cells)} |")
 
 
 def _windows(scenario, evaders: list[str], games: int, seed: int):
@@ -250,6 +258,7 @@ def main() -> None:
     g.add_argument("--steps", type=int, default=10000, help="transitions per side")
     g.add_argument("--hidden", type=int, default=64, help="BiMDN units per direction")
     g.add_argument("--repeats", type=int, default=1)
+    g.add_argument("--rounds", type=int, default=1, help="self-play rounds (from the second, learned opponents play)")
     q = sub.add_parser("quality")
     q.add_argument("--config", default="paper")
     q.add_argument("--games", type=int, default=2000, help="training games per evader")

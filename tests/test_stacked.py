@@ -81,9 +81,13 @@ def counting(monkeypatch) -> list[tuple[int, int, int]]:
     return used
 
 
-@pytest.mark.parametrize(("belief", "role"), [("none", "evader"), ("bimdn", "evader"), ("bimdn", "pursuer")])
+@pytest.mark.parametrize(
+    ("belief", "role"),
+    [("none", "evader"), ("bimdn", "evader"), ("bimdn", "pursuer"), ("ukf", "evader"), ("image", "pursuer")],
+)
 def test_a_stacked_pool_plays_as_its_members_one_by_one(quick: Scenario, belief: str, role: str, monkeypatch) -> None:
-    """The evader sees in the world frame; the car pursuer's belief points turn into its heading."""
+    """The evader sees in the world frame; the car pursuer's belief points turn into its heading (and its image
+    belief's wedge-shaped coverage)."""
     count = 3 * WORTH_STACKING[belief]  # with 16 games, enough of them decide together in most steps
     players = members(quick, belief, count, role)
     pool = MixedPolicy(role, players, [str(i) for i in range(count)])

@@ -2,11 +2,11 @@
 
 The filter's state is the opponent's ``(x, y, v_x, v_y)`` (normalised positions, per second); it
 starts at the arena's centre, predicts one window spacing (1 s in the paper) per sample and
-updates with the opponent's position whenever it was seen. Sigma points and weights are
-filterpy's ``MerweScaledSigmaPoints`` (alpha 0.1, beta 2, kappa 1); process noise, measurement
-noise and initial covariance are 0.1 (the paper's values). The belief's mean is the filter's,
-projected into the arena **(ours)**: extrapolating a sighting's velocity for up to 20 s otherwise
-often "believes" the opponent beyond a wall. The filter runs batched over games;
+updates with the opponent's position whenever it was seen. As a UKF with filterpy's
+``MerweScaledSigmaPoints`` (alpha 0.1, beta 2, kappa 1), computed in closed form (:class:`BatchUKF`);
+process noise, measurement noise and initial covariance are 0.1 (the paper's values). The
+belief's mean is the filter's, projected into the arena **(ours)**: extrapolating a sighting's
+velocity for up to 20 s otherwise often "believes" the opponent beyond a wall. The filter runs batched over games;
 ``tests/test_belief.py`` checks it against filterpy's ``UnscentedKalmanFilter`` step by step.
 """
 
@@ -14,12 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 import torch as th
-from filterpy.kalman import MerweScaledSigmaPoints
 
 from pecli.belief.mixture import Mixture
 from pecli.belief.window import WindowDecoder
 
-ALPHA, BETA, KAPPA = 0.1, 2.0, 1.0
 NOISE = 0.1  # process noise, measurement noise and initial covariance (times the identity)
 
 
@@ -31,52 +29,43 @@ def transition(dt: float) -> np.ndarray:
 
 
 class BatchUKF:
-    """``B`` independent UKFs with a linear constant-velocity model and position measurements."""
+    """``B`` independent UKFs with a linear constant-velocity model and position measurements.
+
+    For a linear model the unscented transform is exact: the sigma points of ``(x, P)`` carried
+    through ``F`` give back ``F x`` and ``F P F^T`` whatever the scaling, and those of the predicted
+    state through ``H`` give ``H x``, ``H P H^T`` and ``P H^T``. So the filter computes those in closed
+    form (no Cholesky factor, a 2 x 2 inverse written out) and equals filterpy's
+    ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints`` to rounding, about 3x faster per window.
+    """
 
     def __init__(self, batch: int, dt: float, noise: float = NOISE) -> None:
-        points = MerweScaledSigmaPoints(4, alpha=ALPHA, beta=BETA, kappa=KAPPA)
-        self.wm, self.wc = points.Wm, points.Wc  # (9,)
-        self.spread = points.alpha**2 * (4 + points.kappa)  # lambda + n
-        self.f = transition(dt)
-        self.q = noise * np.eye(4)
-        self.r = noise * np.eye(2)
+        self.dt = dt
+        self.noise = noise
         self.x = np.zeros((batch, 4))
         self.p = np.tile(noise * np.eye(4), (batch, 1, 1))
-        self._sigmas = np.zeros((batch, 9, 4))
-
-    def sigma_points(self) -> np.ndarray:
-        """``(B, 9, 4)``: the mean, then plus and minus the columns of the scaled covariance's Cholesky factor."""
-        lower = np.linalg.cholesky(self.spread * self.p)  # P' = L L^T; filterpy uses the rows of U = L^T
-        offsets = np.swapaxes(lower, 1, 2)  # rows of U
-        return np.concatenate([self.x[:, None], self.x[:, None] + offsets, self.x[:, None] - offsets], axis=1)
 
     def predict(self, rows: np.ndarray) -> None:
-        """Predict one step for the games where ``rows`` is true.
-
-        As filterpy does, the sigma points the update uses are drawn anew from the predicted mean
-        and covariance (process noise included).
-        """
-        sigmas = self.sigma_points() @ self.f.T
-        mean = np.einsum("k,bki->bi", self.wm, sigmas)
-        centred = sigmas - mean[:, None]
-        cov = np.einsum("k,bki,bkj->bij", self.wc, centred, centred) + self.q
-        self.x = np.where(rows[:, None], mean, self.x)
-        self.p = np.where(rows[:, None, None], cov, self.p)
-        self._sigmas = np.where(rows[:, None, None], self.sigma_points(), self._sigmas)
+        """Predict one step for the games where ``rows`` is true: ``x = F x``, ``P = F P F^T + Q``."""
+        games = slice(None) if rows.all() else np.flatnonzero(rows)
+        x, p, dt = self.x[games], self.p[games], self.dt
+        x[:, :2] += dt * x[:, 2:]
+        p[:, :2] += dt * p[:, 2:]  # F P: position rows gain dt times the velocity rows
+        p[:, :, :2] += dt * p[:, :, 2:]  # (F P) F^T: position columns gain dt times the velocity columns
+        p[:, range(4), range(4)] += self.noise
+        self.x[games], self.p[games] = x, p
 
     def update(self, z: np.ndarray, rows: np.ndarray) -> None:
         """Update with positions ``z`` ``(B, 2)`` for the games where ``rows`` is true (after :meth:`predict`)."""
-        zs = self._sigmas[:, :, :2]
-        z_mean = np.einsum("k,bki->bi", self.wm, zs)
-        dz = zs - z_mean[:, None]
-        dx = self._sigmas - self.x[:, None]
-        s = np.einsum("k,bki,bkj->bij", self.wc, dz, dz) + self.r
-        pxz = np.einsum("k,bki,bkj->bij", self.wc, dx, dz)
-        gain = pxz @ np.linalg.inv(s)
-        x = self.x + np.einsum("bij,bj->bi", gain, z - z_mean)
-        p = self.p - gain @ s @ np.swapaxes(gain, 1, 2)
-        self.x = np.where(rows[:, None], x, self.x)
-        self.p = np.where(rows[:, None, None], p, self.p)
+        seen = np.flatnonzero(rows)
+        if seen.size == 0:
+            return
+        x, p = self.x[seen], self.p[seen]
+        s = p[:, :2, :2] + self.noise * np.eye(2)  # innovation covariance H P H^T + R
+        adjugate = np.swapaxes(s[:, ::-1, ::-1], 1, 2) * np.array([[1.0, -1.0], [-1.0, 1.0]])  # [[d, -b], [-c, a]]
+        inverse = adjugate / (s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0])[:, None, None]
+        gain = p[:, :, :2] @ inverse  # P H^T S^-1, (B, 4, 2)
+        self.x[seen] = x + (gain @ (z[seen] - x[:, :2])[:, :, None])[:, :, 0]
+        self.p[seen] = p - gain @ p[:, :2, :]  # K S K^T = K H P
 
 
 class WindowUKF:

@@ -11,9 +11,11 @@ per LSTM time step, whatever the number of members. With few members deciding, t
 weights: ``MAX_GAMES_PER_MEMBER``); :class:`~pecli.policies.mixed.MixedPolicy` then lets them decide alone.
 
 It covers the deterministic actors of off-policy checkpoints built of ``Linear``, ``ReLU`` and ``Tanh`` layers
-(TD3 and DDPG; SAC's and TQC's squashed mean), without a belief or with a ``bimdn`` one; players of other kinds
-(a ``bimdn-mixed``, ``ukf`` or ``image`` belief, CrossQ's batch renormalisation, an ONNX export, scripted ones)
-keep deciding on their own. The results equal the members' own up to float rounding (about 1e-6).
+(TD3 and DDPG; SAC's and TQC's squashed mean), without a belief or with a ``bimdn``, ``ukf`` or ``image`` one. The
+UKF has no weights, so one filter runs over every deciding game's window; the image beliefs' CNNs run as one
+grouped convolution, a group per game with its member's kernels. Players of other kinds (a ``bimdn-mixed`` belief,
+CrossQ's batch renormalisation, an ONNX export, scripted ones) keep deciding on their own. The results equal the
+members' own up to float rounding (about 1e-6).
 """
 
 from __future__ import annotations
@@ -22,20 +24,25 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch as th
+import torch.nn.functional as F
 from torch import nn
 
 from pecli.belief.bimdn import BiMDN
+from pecli.belief.image import ImageBelief, rasterise
+from pecli.belief.model import BeliefModel
 from pecli.models.algorithms import deterministic_actor
 from pecli.models.extractors import BeliefExtractor, KeysExtractor
 from pecli.policies.learned import LearnedPolicy
 
 # how many members must decide in one step for deciding together to be cheaper than one by one (one CPU core,
 # benchmarks/bench_opponents.py): below it, they decide on their own
-WORTH_STACKING = {"none": 4, "bimdn": 4}
+WORTH_STACKING = {"none": 4, "bimdn": 4, "ukf": 2, "image": 2}
 # and at most this many deciding games per member on average: each game's row gathers its member's weights, so with
 # many games per member their own batched calls are cheaper, the sooner the larger the network (ten members, 32 games:
-# 0.67x without a belief, 0.79x with a 64-unit BiMDN, 1.4x with 128 units; self-play's 16 among ten: 1.6)
-MAX_GAMES_PER_MEMBER = {"none": 4.0, "bimdn": 2.0}
+# 0.67x without a belief, 0.79x with a 64-unit BiMDN, 1.4x with 128 units; self-play's 16 among ten: 1.6). The UKF
+# gathers no weights (two members with 32 games each: 0.95x; ten among 16 games: 0.25x); the image CNN's grouped
+# convolutions do (two with 32 games each: 1.1x, four with 16: 0.85x; ten among 16 games: 0.32x)
+MAX_GAMES_PER_MEMBER = {"none": 4.0, "bimdn": 2.0, "ukf": 64.0, "image": 16.0}
 Stack = list[tuple[str, th.Tensor | None, th.Tensor | None]]  # ("linear", W (M, out, in), b (M, out)) or an activation
 ACTIVATIONS = {nn.ReLU: "relu", nn.Tanh: "tanh"}
 
@@ -124,7 +131,85 @@ class _StackedBiMDN:
         z = _run_layers(self.trunk, th.cat([h[:m], h[m:]], dim=2), members)  # as BiMDN: [forward end, backward end]
         logits = _run_layers(self.heads["weight_head"], z, members)
         means = _run_layers(self.heads["mean_head"], z, members).view(m, batch, self.components, 2)
-        return (th.softmax(logits, dim=2).unsqueeze(-1) * means).sum(2)  # Mixture.mean()
+        return _mixture_mean(logits, means)
+
+
+def _mixture_mean(logits: th.Tensor, means: th.Tensor) -> th.Tensor:
+    """:meth:`Mixture.mean` of stacked heads: logits ``(m, B, K)``, means ``(m, B, K, 2)`` → ``(m, B, 2)``."""
+    return (th.softmax(logits, dim=2).unsqueeze(-1) * means).sum(2)
+
+
+class _StackedUKF:
+    """The UKF beliefs of several members (no weights: one filter over all their windows)."""
+
+    def __init__(self, beliefs: Sequence[BeliefModel]) -> None:
+        self.ukf = beliefs[0].ukf
+
+    def means(self, windows: th.Tensor, members: th.Tensor) -> th.Tensor:
+        m, batch = windows.shape[:2]
+        mixture = self.ukf(windows.reshape(m * batch, -1).numpy())
+        return mixture.means[:, 0].view(m, batch, 2)
+
+
+def _cnn_layers(net: ImageBelief) -> tuple[list[nn.Conv2d], list[nn.Module]] | None:
+    """The image belief's two 3 x 3 convolutions and its dense layers, if its CNN has the built-in layout."""
+    layers = list(net.cnn)
+    kinds = [nn.Conv2d, nn.ReLU, nn.MaxPool2d, nn.Conv2d, nn.ReLU, nn.MaxPool2d, nn.Flatten]
+    if len(layers) < len(kinds) or not all(type(layer) is kind for layer, kind in zip(layers, kinds)):
+        return None
+    convs: list[nn.Conv2d] = [layers[0], layers[3]]  # type: ignore[list-item]
+    for conv in convs:
+        if conv.bias is None or conv.stride != (1, 1) or conv.padding != (1, 1) or conv.groups != 1:
+            return None
+    for pool in (layers[2], layers[5]):
+        if pool.kernel_size != 2 or pool.stride != 2 or pool.padding != 0:
+            return None
+    dense = _layers(nn.Sequential(*layers[len(kinds) :]))
+    return None if dense is None else (convs, dense)
+
+
+class _StackedImage:
+    """The image beliefs of several members: one rasterising pass, their CNNs as grouped convolutions."""
+
+    def __init__(self, beliefs: Sequence[BeliefModel]) -> None:
+        nets: list[ImageBelief] = [b.net for b in beliefs]  # type: ignore[misc]
+        cnns = [cnn for cnn in map(_cnn_layers, nets) if cnn is not None]
+        if len(cnns) != len(nets):
+            raise ValueError("image beliefs stack only with the built-in CNN layout")
+        self.decoder, self.grid = nets[0].decoder, nets[0].grid
+        self.convs = [  # each convolution's kernels (M, out, in, 3, 3) and biases (M, out)
+            (th.stack([c.weight.detach() for c in layer]), th.stack([th.as_tensor(c.bias).detach() for c in layer]))
+            for layer in zip(*(convs for convs, _ in cnns))
+        ]
+        self.dense = _stack_layers([dense for _, dense in cnns])
+        self.heads = {
+            name: _stack_layers([list(getattr(net.head, name)) for net in nets])
+            for name in ("weight_head", "mean_head")
+        }
+        self.components = nets[0].head.components
+
+    def means(self, windows: th.Tensor, members: th.Tensor) -> th.Tensor:
+        m, batch = windows.shape[:2]
+        rows = th.repeat_interleave(members, batch)  # each window's member
+        images = rasterise(self.decoder(windows.reshape(m * batch, -1).numpy()), self.decoder, self.grid)
+        x = th.as_tensor(images).reshape(1, -1, self.grid, self.grid)  # one group of 3 channels per window
+        for weight, bias in self.convs:
+            kernels = weight[rows]  # (R, out, in, 3, 3)
+            x = F.conv2d(x, kernels.flatten(0, 1), bias[rows].flatten(), padding=1, groups=len(rows))
+            x = F.max_pool2d(th.relu(x), 2)
+        z = _run_layers(self.dense, x.reshape(len(rows), 1, -1), rows)  # Flatten: (channels, height, width)
+        logits = _run_layers(self.heads["weight_head"], z, rows)
+        means = _run_layers(self.heads["mean_head"], z, rows).view(len(rows), 1, self.components, 2)
+        return _mixture_mean(logits, means).view(m, batch, 2)
+
+
+def _stacked_belief(kind: str, beliefs: Sequence[BeliefModel]) -> _StackedBiMDN | _StackedUKF | _StackedImage | None:
+    """The stacked belief of members whose beliefs are of ``kind`` (``None`` without one)."""
+    if kind == "none":
+        return None
+    if kind == "bimdn":
+        return _StackedBiMDN([b.net for b in beliefs])  # type: ignore[misc]
+    return _StackedUKF(beliefs) if kind == "ukf" else _StackedImage(beliefs)
 
 
 class StackedActors:
@@ -138,10 +223,10 @@ class StackedActors:
         actors = [_layers(deterministic_actor(member.actor)) for member in members]
         self.actor = _stack_layers(actors)  # type: ignore[arg-type]
         beliefs = [member._belief for member in members]
-        self.belief = _StackedBiMDN([b.net for b in beliefs]) if beliefs[0] is not None else None  # type: ignore
+        kind = "none" if beliefs[0] is None else beliefs[0].kind
+        self.belief = _stacked_belief(kind, beliefs)  # type: ignore[arg-type]
         self.frame = beliefs[0].frame if beliefs[0] is not None else None
         self.window = beliefs[0].window if beliefs[0] is not None else None
-        kind = "bimdn" if self.belief is not None else "none"
         self.worth, self.games_per_member = WORTH_STACKING[kind], MAX_GAMES_PER_MEMBER[kind]
 
     def worth_it(self, members: int, games: int) -> bool:
@@ -165,6 +250,19 @@ class StackedActors:
         belief = member._belief
         if belief is None:
             return ("none", _signature(layers))
+        frame = belief.frame
+        shared = (_signature(layers), belief.window, frame.frame, frame.half, frame.inverse_range, frame.heading_index)
+        if belief.kind == "ukf":
+            return ("ukf", *shared, belief.decoder.scenario.model_dump_json())
+        if belief.kind == "image" and isinstance(belief.net, ImageBelief):
+            image = belief.net
+            cnn = _cnn_layers(image)
+            if cnn is None:
+                return None
+            heads = tuple(_signature(list(getattr(image.head, name))) for name in ("weight_head", "mean_head"))
+            convs = tuple(tuple(conv.weight.shape) for conv in cnn[0])
+            scenario = image.decoder.scenario.model_dump_json()
+            return ("image", *shared, convs, _signature(cnn[1]), heads, image.grid, scenario)
         if (
             belief.kind != "bimdn"
             or not isinstance(belief.net, BiMDN)
@@ -174,21 +272,8 @@ class StackedActors:
         ):
             return None
         net = belief.net
-        frame = belief.frame
         heads = tuple(_signature(list(getattr(net.head, name))) for name in ("weight_head", "mean_head"))
-        return (
-            "bimdn",
-            _signature(layers),
-            belief.window,
-            net.lstm.hidden_size,
-            net.components,
-            _signature(list(net.trunk)),
-            heads,
-            frame.frame,
-            frame.half,
-            frame.inverse_range,
-            frame.heading_index,
-        )
+        return ("bimdn", *shared, net.lstm.hidden_size, net.components, _signature(list(net.trunk)), heads)
 
     @classmethod
     def of(cls, members: Sequence[object]) -> dict[int, tuple[StackedActors, int]]:

@@ -48,6 +48,7 @@ def test_builtin_experiments() -> None:
         "table1",
         "table1-small",
         "table1-paper-settings",
+        "table1-paper-settings-full",
         "table2",
         "strength",
         "schedules",
@@ -69,6 +70,14 @@ def test_builtin_experiments() -> None:
     assert [(r.kind, r.seed) for r in table1.runs()] == [(r.kind, r.seed) for r in paper_settings.runs()]
     assert all(r.schedule == "league" and r.cpu_hours == 1 for r in table1.runs())
     assert table1.spec.ranking.players == "handed-over" and table1.scenario.fingerprint() == run.scenario.fingerprint()
+    full = load_experiment("table1")  # the league recipe at the paper's budget: 55 rounds of 40 000, ~2.2M transitions
+    assert [(r.kind, r.seed, r.schedule, r.cpu_hours) for r in full.runs()] == [
+        (r.kind, r.seed, "league", None) for r in paper_settings.runs()
+    ]
+    selfplay = full.runs()[0].scenario.training.selfplay
+    assert selfplay.rounds * selfplay.steps_per_round == 2_200_000 and full.spec.ranking.players == "handed-over"
+    paper_full = load_experiment("table1-paper-settings-full").runs()[0].scenario.training.selfplay
+    assert paper_full.rounds * paper_full.steps_per_round == 2_200_000
     assert load_experiment("table2").scenario.name == "point_mass"
     smoke = load_experiment("smoke")
     assert [r.kind for r in smoke.runs()] == ["none", "bimdn"] and smoke.scenario.training.learning_starts == 200

@@ -42,6 +42,7 @@ BUILTIN_EXPERIMENTS = (
     "strength-small",
     "table1",
     "table1-paper-settings",
+    "table1-paper-settings-full",
     "table1-small",
     "table2",
 )

@@ -42,6 +42,26 @@ def write(tmp_path: Path, data: dict) -> Path:
     return path
 
 
+def test_the_status_table_gives_each_self_play_run_its_rounds_per_cpu_hour() -> None:
+    from rich.console import Console
+
+    from pecli.cli.experiment import runs_table
+    from pecli.experiment.folder import RunStatus
+    from pecli.experiment.runs import RunProgress
+
+    none, bimdn = load_experiment("smoke").runs()
+    rows = [
+        RunStatus(none, RunProgress(round=46, rounds=150, steps=3_680_000, cpu_seconds=3642.0, done=True), "done"),
+        RunStatus(bimdn, RunProgress(round=0, rounds=150, steps=4_000, cpu_seconds=20.0, done=False), "running"),
+    ]
+    console = Console(width=200, record=True)
+    console.print(runs_table(rows, "t"))
+    lines = console.export_text().splitlines()
+    assert "rounds/CPU-h" in lines[2]
+    assert next(line for line in lines if none.name in line).split("│")[7].strip() == "45"  # 46 rounds in 1.01 h
+    assert next(line for line in lines if bimdn.name in line).split("│")[7].strip() == "-"  # no round yet
+
+
 def test_builtin_experiments() -> None:
     assert {
         "smoke",

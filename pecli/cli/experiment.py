@@ -67,10 +67,18 @@ def progress_line(rows: list[RunStatus]) -> str:
     return f"{done}/{len(rows)} runs done, {cpu / 3600:.2f} CPU-hours of training{estimate}"
 
 
+def rounds_per_cpu_hour(row: RunStatus) -> str:
+    """A self-play run's rounds per CPU-hour so far (``-`` before its first round): what a kind costs."""
+    p = row.progress
+    return f"{p.round / (p.cpu_seconds / 3600):.0f}" if p.rounds and p.round and p.cpu_seconds > 0 else "-"
+
+
 def runs_table(rows: list[RunStatus], title: str) -> Table:
-    """One row per run: kind, seed, schedule (when the grid has several), round, transitions, CPU time,
-    status, and the host it runs on (when another machine ran any); below it, :func:`progress_line`."""
+    """One row per run: kind, seed, schedule (when the grid has several), round, transitions, CPU time, rounds
+    per CPU-hour (self-play), status, and the host it runs on (when another machine ran any); below it,
+    :func:`progress_line`."""
     schedules = len({row.run.schedule for row in rows}) > 1
+    selfplay = any(row.progress.rounds for row in rows)
     hosts = any(row.host not in ("", socket.gethostname()) for row in rows)
     table = Table(title=title, title_justify="left", caption=progress_line(rows), caption_justify="left")
     table.add_column("run", no_wrap=True)
@@ -78,7 +86,7 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
     table.add_column("seed", justify="right")
     if schedules:
         table.add_column("schedule", no_wrap=True)
-    for column in ("round", "steps", "CPU time"):
+    for column in ("round", "steps", "CPU time", *(["rounds/CPU-h"] if selfplay else [])):
         table.add_column(column, justify="right", no_wrap=True)
     table.add_column("status", overflow="fold", min_width=7)
     if hosts:
@@ -99,6 +107,7 @@ def runs_table(rows: list[RunStatus], title: str) -> Table:
             where,
             f"{p.steps:,}",
             _minutes(p.cpu_seconds),
+            *([rounds_per_cpu_hour(row)] if selfplay else []),
             status,
             *([row.host] if hosts else []),
         ]

@@ -19,6 +19,7 @@ from pecli.cli import (
     export,
     hj,
     play,
+    psro,
     selfplay,
     tournament,
     train,
@@ -74,6 +75,7 @@ app.command(name="tournament", rich_help_panel="Play and evaluate")(tournament.t
 app.command(name="train", rich_help_panel="Learn")(train.train)
 app.command(name="selfplay", rich_help_panel="Learn")(selfplay.selfplay)
 app.command(name="exploit", rich_help_panel="Play and evaluate")(exploit.exploit)
+app.command(name="psro", rich_help_panel="Learn")(psro.psro)
 app.add_typer(tune.app, name="tune", rich_help_panel="Learn")
 app.add_typer(experiment.app, name="experiment", rich_help_panel="Learn")
 app.add_typer(zoo.app, name="zoo", rich_help_panel="Checkpoints")

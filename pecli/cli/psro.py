@@ -1,0 +1,120 @@
+"""``pecli psro``: PSRO from a pursuer–evader pair, trained best responses as the oracle, NashConv per iteration."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from pecli.cli.common import (
+    PlayersConfigOption,
+    console,
+    err_console,
+    require_batch,
+    require_positive,
+    scenario_for,
+    user_errors,
+)
+from pecli.cli.exploit import responses_stop
+
+
+def _table(iterations: list) -> Table:  # noqa: ANN001 (pecli.psro loads torch: imported in the command)
+    table = Table(
+        title="PSRO: each iteration's Nash mixtures and the best responses to them",
+        caption="NashConv = capture(BR pursuer vs evader mixture) − capture(pursuer mixture vs BR evader), 95 % "
+        "interval over the held-out games; value: the mixtures against each other in the meta-game",
+    )
+    for column in ("iteration", "pursuers", "evaders", "value", "BR pursuer", "vs BR evader", "NashConv", "95 %"):
+        table.add_column(column, justify="left" if column in ("pursuers", "evaders") else "right", overflow="fold")
+    for index, it in enumerate(iterations, start=1):
+        low, high = it.interval
+        table.add_row(
+            str(index),
+            ", ".join(f"{name} {w:.2f}" for name, w in it.pursuer_mixture.items()),
+            ", ".join(f"{name} {w:.2f}" for name, w in it.evader_mixture.items()),
+            f"{it.value:.3f}",
+            f"{it.best_pursuer:.3f}",
+            f"{it.best_evader:.3f}",
+            f"{it.nash_conv:.3f}",
+            f"[{low:.3f}, {high:.3f}]",
+        )
+    return table
+
+
+@user_errors
+def psro(
+    pursuer: Annotated[str, typer.Argument(help="The first pursuer: a checkpoint, an export or a policy string.")],
+    evader: Annotated[str, typer.Argument(help="The first evader.")],
+    config: PlayersConfigOption = None,
+    iterations: Annotated[int, typer.Option("--iterations", "-i", help="PSRO iterations (a re-run may add more).")] = 3,
+    cpu_minutes: Annotated[
+        float, typer.Option("--cpu-minutes", help="CPU-minutes each best response trains (its evaluations included).")
+    ] = 20.0,
+    seeds: Annotated[
+        int, typer.Option("--seeds", help="Best responses per role and iteration (the strongest joins).")
+    ] = 1,
+    warm: Annotated[
+        bool,
+        typer.Option(
+            "--warm/--fresh",
+            help="Start each best response from its population's newest checkpoint (--fresh: from scratch).",
+        ),
+    ] = True,
+    episodes: Annotated[int, typer.Option("--episodes", "-n", help="Games per pairing of the meta-game.")] = 200,
+    held_out: Annotated[
+        int, typer.Option("--held-out", help="Held-out games of each best response against the mixture.")
+    ] = 500,
+    workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing the meta-game.")] = 1,
+    out: Annotated[Path, typer.Option("--out", help="The PSRO folder (a re-run continues it).")] = Path("runs/psro"),
+    as_json: Annotated[bool, typer.Option("--json", help="Print the iterations as JSON.")] = False,
+) -> None:
+    """PSRO from PURSUER and EVADER: grow both populations with trained best responses until their Nash mixtures
+    are hard to exploit.
+
+    Each iteration plays the populations' meta-game (every pursuer against every evader, [bold]--episodes[/] games,
+    cached), solves its Nash equilibrium and writes it as OUT/iter-NN/nash.json (a player as nash:OUT/iter-NN).
+    A best response of each role then trains [bold]--cpu-minutes[/] against the other side's mixture on the real
+    game, and its [bold]--held-out[/] games measure the mixtures' NashConv. The strongest response of each role
+    joins its population. Stopping is safe: the same command continues; a larger [bold]--iterations[/] goes on.
+    Writes psro.json and nash-conv.png into [bold]--out[/].
+    """
+    from pecli.psro import PsroJob, iteration_folder
+    from pecli.psro import psro as run_psro
+
+    require_batch(episodes, "play fewer")
+    require_positive(held_out, "--held-out")
+    require_positive(seeds, "--seeds")
+    require_positive(workers, "--workers")
+    scenario = scenario_for([pursuer, evader], config)
+    job = PsroJob(
+        pursuer=pursuer,
+        evader=evader,
+        scenario=scenario,
+        out=out,
+        iterations=iterations,
+        cpu_minutes=cpu_minutes,
+        seeds=tuple(range(seeds)),
+        warm=warm,
+        episodes=episodes,
+        held_out=held_out,
+        workers=workers,
+    )
+
+    def report(line: str) -> None:
+        if not as_json:
+            err_console.print(line, highlight=False, markup=False)
+
+    with responses_stop():
+        done = run_psro(job, report)
+    if as_json:
+        typer.echo(json.dumps([it.model_dump(mode="json") for it in done], indent=2))
+        return
+    console.print(_table(done))
+    err_console.print(
+        f"wrote {out / 'psro.json'}; the last mixture plays as nash:{iteration_folder(out, len(done))}",
+        highlight=False,
+        markup=False,
+    )

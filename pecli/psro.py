@@ -1,0 +1,325 @@
+"""PSRO over whole players: the double oracle with trained best responses (Lanctot et al. 2017).
+
+Two populations start from the players given (e.g. a league run's handed-over pursuer and evader). Each
+iteration plays the meta-game of the populations (every pursuer against every evader, cached, so an iteration
+plays only its new members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes it as
+``OUT/iter-NN/nash.json``, a player as ``nash:OUT/iter-NN``. Then one best response per role trains against the
+other side's Nash mixture on the real game (:mod:`pecli.exploit`: from scratch, or warm-started from the newest
+checkpoint of its own population), and its held-out games against that mixture measure the mixtures' NashConv,
+``capture(BR pursuer, evader mixture) - capture(pursuer mixture, BR evader)`` (approximate, as the responses
+are). The strongest response of each role joins its population, and the next iteration solves the larger game.
+
+NashConv per iteration is what PSRO drives down; the last iteration's mixture is the player to hand over. The
+output folder holds ``psro.json`` (the job and every finished iteration), ``meta-game/`` (the pairings' cache),
+one ``iter-NN/`` per iteration (``nash.json``, ``against-pursuer/``, ``against-evader/``, ``pair.json``, as
+``pecli exploit --pair`` writes them) and ``nash-conv.png``. A stopped command continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from pecli.errors import PecliError
+from pecli.exploit import MAX_CPU_MINUTES, ExploitJob, ExploitResult, PairResult, exploit, pair_games
+from pecli.io import atomic_path, atomic_write_json, read_json
+from pecli.locks import locked
+from pecli.metagame import MetaGame, solve
+from pecli.policies import resolve_policy
+from pecli.policies.nash import NASH_FILE
+from pecli.roles import ROLES, Role, opponent_of
+from pecli.scenario import Scenario
+from pecli.tournament import pairing_results, player_spec
+
+RECORD_FILE = "psro.json"
+CURVE_FILE = "nash-conv.png"
+MAX_ITERATIONS = 100
+
+
+@dataclass(frozen=True)
+class PsroJob:
+    """PSRO from the pair ``(pursuer, evader)`` in ``scenario``, into ``out``.
+
+    Each iteration trains ``len(seeds)`` responses per role of ``cpu_minutes`` each (``warm``: from the newest
+    checkpoint of the learner's population, where it holds one), measures them in ``held_out`` games against
+    the mixture, and plays every new pairing of the meta-game ``episodes`` times.
+    """
+
+    pursuer: str
+    evader: str
+    scenario: Scenario
+    out: Path
+    iterations: int = 3
+    cpu_minutes: float = 20.0
+    seeds: Sequence[int] = (0,)
+    warm: bool = True
+    episodes: int = 200
+    held_out: int = 500
+    workers: int = 1
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+
+class Iteration(_Record):
+    """One finished iteration, as ``psro.json`` keeps it."""
+
+    value: float = Field(ge=0.0, le=1.0)  # the meta-game's value: the mixtures' capture rate against each other
+    pursuer_mixture: dict[str, float]
+    evader_mixture: dict[str, float]
+    best_pursuer: float = Field(ge=0.0, le=1.0)  # the BR pursuer's capture rate against the evader mixture
+    best_evader: float = Field(ge=0.0, le=1.0)  # the pursuer mixture's capture rate against the BR evader
+    nash_conv: float = Field(ge=-1.0, le=1.0)
+    interval: list[float] = Field(min_length=2, max_length=2)  # NashConv's 95 % interval
+    joined: dict[str, str]  # role -> the new member's checkpoint (out-relative)
+
+
+class PsroRecord(_Record):
+    """``psro.json``: the start (a re-run must match it) and the iterations finished so far."""
+
+    kind: str = Field(default="psro", pattern="^psro$")
+    pursuer: str = Field(max_length=4096)
+    evader: str = Field(max_length=4096)
+    scenario: str = Field(max_length=1000)
+    scenario_hash: str = Field(max_length=200)
+    cpu_minutes: float = Field(gt=0, le=MAX_CPU_MINUTES)
+    seeds: list[int] = Field(min_length=1, max_length=100)
+    warm: bool
+    episodes: int = Field(ge=1, le=10**6)
+    held_out: int = Field(ge=1, le=10**7)
+    iterations: list[Iteration] = Field(default_factory=list, max_length=MAX_ITERATIONS)
+
+    def settings(self) -> dict:
+        return self.model_dump(exclude={"iterations"})
+
+
+def iteration_folder(out: Path, index: int) -> Path:
+    """``OUT/iter-01``: the ``index``-th iteration (from 1); ``nash:`` of it plays its meta-game's mixture."""
+    return out / f"iter-{index:02d}"
+
+
+def _stored(spec: str, out: Path, folder: Path) -> str:
+    """How a member is written into ``folder/nash.json``: a file inside ``out`` relative to ``folder`` (so the
+    whole PSRO folder can move), any other file by its absolute path, a policy string as given."""
+    path = Path(spec)
+    if not path.is_file():
+        return spec
+    resolved = path.resolve()
+    if resolved.is_relative_to(out.resolve()):
+        return os.path.relpath(resolved, folder.resolve())
+    return str(resolved)
+
+
+def _check(job: PsroJob) -> None:
+    if not 1 <= job.iterations <= MAX_ITERATIONS:
+        raise PecliError(f"--iterations must be from 1 to {MAX_ITERATIONS}, not {job.iterations}")
+    if not 0 < job.cpu_minutes <= MAX_CPU_MINUTES or not math.isfinite(job.cpu_minutes):
+        raise PecliError(f"--cpu-minutes must be in (0, {MAX_CPU_MINUTES:g}], not {job.cpu_minutes}")
+    if not job.seeds or len(set(job.seeds)) != len(job.seeds) or min(job.seeds) < 0:
+        raise PecliError("--seeds: one or more different non-negative seeds")
+    from pecli.match import MAX_EPISODES
+
+    if not 1 <= job.episodes <= MAX_EPISODES or not 1 <= job.held_out <= MAX_EPISODES:
+        raise PecliError(f"the meta-game's and the held-out games' episodes must be from 1 to {MAX_EPISODES:,}")
+    for role, spec in (("pursuer", job.pursuer), ("evader", job.evader)):
+        resolve_policy(spec, role, job.scenario, seed=0)  # plays this game and role, or one line why not
+
+
+def _read_record(path: Path) -> PsroRecord | None:
+    if not path.is_file():
+        return None
+    try:
+        return PsroRecord.model_validate(read_json(path, "PSRO record"))
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise PecliError(f"{path}: not a PSRO record ({where}: {first['msg']}); use another --out") from None
+
+
+def _fresh_record(job: PsroJob) -> PsroRecord:
+    return PsroRecord(
+        pursuer=player_spec(job.pursuer),
+        evader=player_spec(job.evader),
+        scenario=job.scenario.name,
+        scenario_hash=job.scenario.fingerprint(),
+        cpu_minutes=job.cpu_minutes,
+        seeds=list(job.seeds),
+        warm=job.warm,
+        episodes=job.episodes,
+        held_out=job.held_out,
+    )
+
+
+def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable[[str], None]) -> MetaGame:
+    """Every pursuer of the populations against every evader (cached in ``out/meta-game``), solved."""
+    grid = pairing_results(
+        job.scenario,
+        populations["pursuer"],
+        populations["evader"],
+        job.episodes,
+        [0],
+        job.out / "meta-game",
+        job.workers,
+        on_result=lambda r, cached: (
+            None if cached else report(f"meta-game: {r.pursuer} vs {r.evader}: {r.capture_rate:.3f}")
+        ),
+    )
+    matrix = np.array(
+        [
+            [grid[(player_spec(p), player_spec(e))].capture_rate for e in populations["evader"]]
+            for p in populations["pursuer"]
+        ]
+    )
+    names = {role: [f"{role}-{k}" for k in range(len(populations[role]))] for role in ROLES}
+    return solve(names["pursuer"], names["evader"], matrix)
+
+
+def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str]], folder: Path) -> Path:
+    """``folder/nash.json``: each side's equilibrium members (``nash:FOLDER`` plays it)."""
+
+    folder.mkdir(parents=True, exist_ok=True)
+
+    def members(role: Role) -> list[dict]:
+        specs = dict(zip((game.pursuers if role == "pursuer" else game.evaders), populations[role]))
+        return [
+            {"name": n, "spec": _stored(specs[n], job.out, folder), "weight": w} for n, w in game.support(role).items()
+        ]
+
+    path = folder / NASH_FILE
+    record = {
+        "kind": "nash",
+        "scenario": job.scenario.name,
+        "scenario_hash": job.scenario.fingerprint(),
+        "value": game.value,
+        "pursuer": members("pursuer"),
+        "evader": members("evader"),
+        "exploitability": game.exploitability(),
+    }
+    atomic_write_json(path, record)
+    return path
+
+
+def _responses(
+    job: PsroJob, folder: Path, populations: dict[Role, list[str]], report: Callable[[str], None]
+) -> dict[Role, ExploitResult]:
+    """The best responses to each side of the mixture in ``folder``, keyed by the role they answer."""
+    results = {}
+    for role in ROLES:
+        newest = populations[opponent_of(role)][-1]  # the learner's population's newest member
+        start = Path(newest) if job.warm and newest.lower().endswith(".zip") else None
+        results[role] = exploit(
+            ExploitJob(
+                target=f"nash:{folder}",
+                role=role,
+                scenario=job.scenario,
+                out=folder / f"against-{role}",
+                cpu_minutes=job.cpu_minutes,
+                seeds=tuple(job.seeds),
+                warm_start=start,
+                fresh=start is None,
+                episodes=job.held_out,
+            ),
+            report,
+        )
+    return results
+
+
+def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> list[Iteration]:
+    """Run the iterations of ``job`` not yet in ``job.out`` (continuing a stopped one) and return them all;
+    :class:`PecliError` if ``job.out`` holds PSRO from other players or settings."""
+    _check(job)
+    job.out.mkdir(parents=True, exist_ok=True)
+    path = job.out / RECORD_FILE
+    with locked(job.out, "PSRO"):
+        record = _fresh_record(job)
+        kept = _read_record(path)
+        if kept is not None:
+            if kept.settings() != record.settings():
+                raise PecliError(f"{job.out} holds PSRO from other players or settings; use another --out")
+            record = kept
+        atomic_write_json(path, record.model_dump(mode="json"))
+        populations: dict[Role, list[str]] = {"pursuer": [job.pursuer], "evader": [job.evader]}
+        for done in record.iterations:
+            for role, checkpoint in done.joined.items():
+                populations[role].append(str(job.out / checkpoint))  # type: ignore[index]
+        for index in range(len(record.iterations) + 1, job.iterations + 1):
+            folder = iteration_folder(job.out, index)
+            report(
+                f"iteration {index}/{job.iterations}: {len(populations['pursuer'])} pursuers, "
+                f"{len(populations['evader'])} evaders"
+            )
+            game = meta_game(job, populations, report)
+            write_mixture(job, game, populations, folder)
+            results = _responses(job, folder, populations, report)
+            captures, episodes = pair_games(f"nash:{folder}", f"nash:{folder}", job.scenario, folder, job.held_out)
+            pair = PairResult(
+                f"nash:{folder}", f"nash:{folder}", captures, episodes, results["pursuer"], results["evader"]
+            )
+            joined = {}
+            for answered, result in results.items():
+                learner = opponent_of(answered)
+                checkpoint = folder / f"against-{answered}" / result.strongest().checkpoint
+                populations[learner].append(str(checkpoint))
+                joined[learner] = str(checkpoint.relative_to(job.out))
+            iteration = Iteration(
+                value=game.value,
+                pursuer_mixture=game.support("pursuer"),
+                evader_mixture=game.support("evader"),
+                best_pursuer=pair.against_evader.strongest().capture_rate,
+                best_evader=pair.against_pursuer.strongest().capture_rate,
+                nash_conv=pair.nash_conv,
+                interval=list(pair.interval),
+                joined=joined,
+            )
+            record = record.model_copy(update={"iterations": [*record.iterations, iteration]})
+            atomic_write_json(path, record.model_dump(mode="json"))
+            low, high = iteration.interval
+            report(
+                f"iteration {index}: NashConv {iteration.nash_conv:.3f} [{low:.3f}, {high:.3f}] (BR pursuer "
+                f"{iteration.best_pursuer:.3f}, BR evader holds the pursuers to {iteration.best_evader:.3f})"
+            )
+        draw_nash_conv(record.iterations, job.out / CURVE_FILE)
+    return list(record.iterations)
+
+
+def read_psro(out: Path) -> list[Iteration]:
+    """The iterations recorded in ``out`` (none: an empty list), without training anything."""
+    record = _read_record(out / RECORD_FILE)
+    return [] if record is None else list(record.iterations)
+
+
+def draw_nash_conv(iterations: Sequence[Iteration], path: Path) -> Path | None:
+    """NashConv per iteration with its 95 % interval, and what each side's response reached (PNG)."""
+    if not iterations:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.arange(1, len(iterations) + 1)
+    nash_conv = np.array([it.nash_conv for it in iterations])
+    low, high = (np.array([it.interval[k] for it in iterations]) for k in (0, 1))
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.errorbar(x, nash_conv, yerr=[nash_conv - low, high - nash_conv], marker="o", capsize=3, label="NashConv")
+    ax.plot(x, [it.best_pursuer for it in iterations], "^--", label="BR pursuer vs evader mixture")
+    ax.plot(x, [it.best_evader for it in iterations], "v--", label="pursuer mixture vs BR evader")
+    ax.plot(x, [it.value for it in iterations], "s:", label="meta-game value")
+    ax.set_xlabel("PSRO iteration")
+    ax.set_ylabel("capture rate / NashConv")
+    ax.set_xticks(x)
+    ax.set_ylim(-0.05, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=120)
+    plt.close(fig)
+    return path

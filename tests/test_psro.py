@@ -1,0 +1,84 @@
+"""``pecli psro``: the populations' meta-game, its Nash mixtures as players, best responses joining, resumable."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from pecli.cli import app
+from pecli.exploit import read_pair
+from pecli.policies import resolve_policy
+from pecli.policies.nash import read_nash
+from pecli.psro import PsroJob, psro, read_psro
+from pecli.scenario import Scenario, load_scenario
+
+runner = CliRunner()
+TINY = {
+    "buffer_size": 2000,
+    "batch_size": 32,
+    "learning_starts": 100,
+    "net_arch": [16, 16],
+    "n_envs": 4,
+    "checkpoint_every": 5,
+    "eval_episodes": 10,
+}
+
+
+@pytest.fixture
+def tiny(tmp_path: Path, quick: Scenario) -> Path:
+    data = quick.model_dump(mode="json")
+    data["training"].update(TINY)
+    data["name"] = "quick"
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_path: Path, tiny: Path) -> None:
+    out = tmp_path / "psro"
+    args = ["psro", "pure-pursuit", "hider", "-c", str(tiny), "--iterations", "1", "--cpu-minutes", "0.015"]
+    args += ["-n", "10", "--held-out", "20", "--out", str(out), "--json"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0, first.output
+    assert len(json.loads(first.stdout)) == 1
+    second = runner.invoke(app, [*args[:6], "2", *args[7:]])  # two iterations: the first one is not trained again
+    assert second.exit_code == 0, second.output
+    iterations = json.loads(second.stdout)
+    assert len(iterations) == 2 and iterations[0] == json.loads(first.stdout)[0]
+    assert iterations[0]["pursuer_mixture"] == {"pursuer-0": 1.0}  # one member each: the mixture is the player
+    assert set(iterations[1]["pursuer_mixture"]) <= {"pursuer-0", "pursuer-1"}
+    for it in iterations:
+        assert it["nash_conv"] == pytest.approx(it["best_pursuer"] - it["best_evader"])
+        assert it["interval"][0] <= it["nash_conv"] <= it["interval"][1]
+    first_pursuer = out / iterations[0]["joined"]["pursuer"]
+    assert first_pursuer.is_file() and "iter-01/against-evader/fresh-s0" in iterations[0]["joined"]["pursuer"]
+    assert "iter-02/against-evader/warm-s0" in iterations[1]["joined"]["pursuer"]  # warm from the newest member
+    record = read_nash(out / "iter-02" / "nash.json")  # the members of iteration 2's game, relative to its folder
+    assert {m.name for m in record.pursuer} <= {"pursuer-0", "pursuer-1"}
+    scenario = load_scenario(str(tiny))
+    player = resolve_policy(f"nash:{out / 'iter-02'}", "evader", scenario)
+    assert player.role == "evader"
+    pair = read_pair(out / "iter-02")
+    assert pair is not None and pair.nash_conv == pytest.approx(iterations[1]["nash_conv"])
+    assert (out / "nash-conv.png").stat().st_size > 1000 and read_psro(out) == read_psro(out)
+    other = PsroJob("pure-pursuit", "rash", scenario, out, iterations=2, cpu_minutes=0.015, episodes=10, held_out=20)
+    with pytest.raises(Exception, match="other players or settings"):
+        psro(other)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["pure-pursuit", "hider", "--iterations", "0"], "--iterations"),
+        (["pure-pursuit", "hider", "--cpu-minutes", "inf"], "--cpu-minutes"),
+        (["hider", "pure-pursuit"], "hider"),
+        (["pure-pursuit", "missing.zip"], "missing.zip"),
+    ],
+)
+def test_mistakes_end_in_one_line(tmp_path: Path, args: list[str], message: str) -> None:
+    result = runner.invoke(app, ["psro", *args, "-c", "quick", "--out", str(tmp_path / "p")])
+    assert result.exit_code != 0 and message in result.output and "Traceback" not in result.output

@@ -9,7 +9,10 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 from pecli.text import article
 
@@ -20,6 +23,7 @@ def _read_umask() -> int:
     return mask
 
 
+RecordT = TypeVar("RecordT", bound="BaseModel")
 _UMASK = _read_umask()  # read once at import: os.umask() changes a process-wide setting
 
 
@@ -85,3 +89,20 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
     except (OSError, ValueError, RecursionError) as exc:  # ValueError: not JSON, or an integer of > 4300 digits
         reason = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
         raise PecliError(f"{path}: damaged {what} ({reason})") from None
+
+
+def read_output_record(path: Path, model: type[RecordT], what: str) -> RecordT | None:
+    """An output folder's record at ``path`` validated as ``model`` (a pydantic model); None if there is none yet;
+    :class:`~pecli.errors.PecliError` in one line (``not a <what> ...; use another --out``) if it is not one."""
+    from pydantic import ValidationError
+
+    from pecli.errors import PecliError
+
+    if not path.is_file():
+        return None
+    try:
+        return model.model_validate(read_json(path, what))
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise PecliError(f"{path}: not {article(what)} ({where}: {first['msg']}); use another --out") from None

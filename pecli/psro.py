@@ -24,11 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
 from pecli.errors import PecliError
 from pecli.exploit import MAX_CPU_MINUTES, ExploitJob, ExploitResult, PairResult, exploit, pair_games
-from pecli.io import atomic_path, atomic_write_json, read_json
+from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
@@ -133,14 +133,7 @@ def _check(job: PsroJob) -> None:
 
 
 def _read_record(path: Path) -> PsroRecord | None:
-    if not path.is_file():
-        return None
-    try:
-        return PsroRecord.model_validate(read_json(path, "PSRO record"))
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
-        raise PecliError(f"{path}: not a PSRO record ({where}: {first['msg']}); use another --out") from None
+    return read_output_record(path, PsroRecord, "PSRO record")
 
 
 def _fresh_record(job: PsroJob) -> PsroRecord:

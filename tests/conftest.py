@@ -24,6 +24,30 @@ def quick() -> Scenario:
     return load_scenario("quick")
 
 
+TINY_LEARNER = {
+    "buffer_size": 2000,
+    "batch_size": 32,
+    "learning_starts": 100,
+    "net_arch": [16, 16],
+    "n_envs": 4,
+    "checkpoint_every": 5,
+    "eval_episodes": 20,
+}
+
+
+@pytest.fixture
+def tiny(tmp_path: Path, quick: Scenario) -> Path:
+    """The quick game with a tiny learner (best responses in seconds): a config file of its own."""
+    import yaml
+
+    data = quick.model_dump(mode="json")
+    data["training"].update(TINY_LEARNER)
+    data["name"] = "quick"
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 def all_scenarios() -> list[Scenario]:
     """Every built-in game in both observation frames (a config that only trains differently, such as
     tuned, is the game of another)."""

@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from pecli.cli import app
@@ -14,28 +13,9 @@ from pecli.exploit import read_pair
 from pecli.policies import resolve_policy
 from pecli.policies.nash import read_nash
 from pecli.psro import PsroJob, psro, read_psro
-from pecli.scenario import Scenario, load_scenario
+from pecli.scenario import load_scenario
 
 runner = CliRunner()
-TINY = {
-    "buffer_size": 2000,
-    "batch_size": 32,
-    "learning_starts": 100,
-    "net_arch": [16, 16],
-    "n_envs": 4,
-    "checkpoint_every": 5,
-    "eval_episodes": 10,
-}
-
-
-@pytest.fixture
-def tiny(tmp_path: Path, quick: Scenario) -> Path:
-    data = quick.model_dump(mode="json")
-    data["training"].update(TINY)
-    data["name"] = "quick"
-    path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
 
 
 def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_path: Path, tiny: Path) -> None:

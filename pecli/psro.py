@@ -32,7 +32,7 @@ from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
-from pecli.policies.nash import NASH_FILE
+from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.tournament import pairing_results, player_spec
@@ -176,26 +176,14 @@ def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable
 
 def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str]], folder: Path) -> Path:
     """``folder/nash.json``: each side's equilibrium members (``nash:FOLDER`` plays it)."""
-
     folder.mkdir(parents=True, exist_ok=True)
-
-    def members(role: Role) -> list[dict]:
-        specs = dict(zip((game.pursuers if role == "pursuer" else game.evaders), populations[role]))
-        return [
-            {"name": n, "spec": _stored(specs[n], job.out, folder), "weight": w} for n, w in game.support(role).items()
-        ]
-
-    path = folder / NASH_FILE
-    record = {
-        "kind": "nash",
-        "scenario": job.scenario.name,
-        "scenario_hash": job.scenario.fingerprint(),
-        "value": game.value,
-        "pursuer": members("pursuer"),
-        "evader": members("evader"),
-        "exploitability": game.exploitability(),
+    specs = {
+        name: _stored(spec, job.out, folder)
+        for role, names in (("pursuer", game.pursuers), ("evader", game.evaders))
+        for name, spec in zip(names, populations[role])  # type: ignore[index]
     }
-    atomic_write_json(path, record)
+    path = folder / NASH_FILE
+    atomic_write_json(path, mixture_record(job.scenario, game, specs))
     return path
 
 

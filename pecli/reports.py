@@ -13,7 +13,7 @@ from rich.text import Text
 
 from pecli.io import atomic_path, atomic_write_json
 from pecli.metagame import WEIGHT_FLOOR, MetaGame
-from pecli.policies.nash import NASH_FILE
+from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.tournament import TournamentResults
 
 TABLE_WIDTH = 120
@@ -188,22 +188,9 @@ def write_reports(results: TournamentResults, out: Path) -> list[Path]:
 
 
 def nash_record(results: TournamentResults, game: MetaGame) -> dict:
-    """What ``nash.json`` holds (:mod:`pecli.policies.nash` reads it): each side's equilibrium members with their
-    policy strings and weights, the game's value and every player's exploitability within the zoo."""
+    """What ``nash.json`` holds for a tournament's meta-game (:func:`pecli.policies.nash.mixture_record`)."""
     specs = {p.name: p.spec for players in results.players.values() for p in players}
-
-    def members(role: str) -> list[dict]:
-        return [{"name": name, "spec": specs[name], "weight": weight} for name, weight in game.support(role).items()]
-
-    return {
-        "kind": "nash",
-        "scenario": results.scenario.name,
-        "scenario_hash": results.scenario.fingerprint(),
-        "value": game.value,
-        "pursuer": members("pursuer"),
-        "evader": members("evader"),
-        "exploitability": game.exploitability(),
-    }
+    return mixture_record(results.scenario, game, specs)
 
 
 def write_nash(results: TournamentResults, game: MetaGame, out: Path) -> Path:

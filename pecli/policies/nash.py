@@ -12,9 +12,9 @@ folder); a ``module:Class`` member is imported only with ``--trust``, and a mixt
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -22,6 +22,9 @@ from pecli.errors import PolicyError
 from pecli.policies.base import Policy
 from pecli.roles import Role
 from pecli.scenario import Scenario
+
+if TYPE_CHECKING:
+    from pecli.metagame import MetaGame
 
 NASH_FILE = "nash.json"
 MAX_MEMBERS = 10_000
@@ -49,6 +52,24 @@ class NashRecord(_Record):
     pursuer: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     evader: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
+
+
+def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str]) -> dict:
+    """What ``nash.json`` holds: each side's equilibrium members of ``game`` with their policy strings (``specs``,
+    by player name) and weights, the game's value and every player's exploitability within it."""
+
+    def members(role: str) -> list[dict]:
+        return [{"name": name, "spec": specs[name], "weight": weight} for name, weight in game.support(role).items()]
+
+    return {
+        "kind": "nash",
+        "scenario": scenario.name,
+        "scenario_hash": scenario.fingerprint(),
+        "value": game.value,
+        "pursuer": members("pursuer"),
+        "evader": members("evader"),
+        "exploitability": game.exploitability(),
+    }
 
 
 def nash_path(options: str) -> Path:

@@ -90,6 +90,19 @@ def _signature(layers: list[nn.Module]) -> tuple:
     return tuple((type(m).__name__, tuple(m.weight.shape) if isinstance(m, nn.Linear) else ()) for m in layers)
 
 
+MEAN_HEADS = ("weight_head", "mean_head")  # what a mixture's mean needs of its head (not the stds)
+
+
+def _stack_heads(heads: Sequence[nn.Module]) -> dict[str, Stack]:
+    """The mixture heads' weight and mean layers (:class:`~pecli.belief.bimdn.MixtureHead`), stacked."""
+    return {name: _stack_layers([list(getattr(head, name)) for head in heads]) for name in MEAN_HEADS}
+
+
+def _head_signature(head: nn.Module) -> tuple:
+    """What mixture heads must share to stack."""
+    return tuple(_signature(list(getattr(head, name))) for name in MEAN_HEADS)
+
+
 class _StackedBiMDN:
     """The BiMDNs of several members stacked: windows ``(m, B, T, d)`` → the mixtures' means ``(m, B, 2)``."""
 
@@ -102,10 +115,7 @@ class _StackedBiMDN:
         self.bias = weights("bias_ih_l0") + weights("bias_hh_l0")
         self.hidden, self.count = nets[0].lstm.hidden_size, len(nets)
         self.trunk = _stack_layers([list(net.trunk) for net in nets])
-        self.heads = {
-            name: _stack_layers([list(getattr(net.head, name)) for net in nets])
-            for name in ("weight_head", "mean_head")
-        }
+        self.heads = _stack_heads([net.head for net in nets])
         self.components = nets[0].components
 
     def means(self, windows: th.Tensor, members: th.Tensor) -> th.Tensor:
@@ -182,10 +192,7 @@ class _StackedImage:
             for layer in zip(*(convs for convs, _ in cnns))
         ]
         self.dense = _stack_layers([dense for _, dense in cnns])
-        self.heads = {
-            name: _stack_layers([list(getattr(net.head, name)) for net in nets])
-            for name in ("weight_head", "mean_head")
-        }
+        self.heads = _stack_heads([net.head for net in nets])
         self.components = nets[0].head.components
 
     def means(self, windows: th.Tensor, members: th.Tensor) -> th.Tensor:
@@ -259,10 +266,9 @@ class StackedActors:
             cnn = _cnn_layers(image)
             if cnn is None:
                 return None
-            heads = tuple(_signature(list(getattr(image.head, name))) for name in ("weight_head", "mean_head"))
             convs = tuple(tuple(conv.weight.shape) for conv in cnn[0])
             scenario = image.decoder.scenario.model_dump_json()
-            return ("image", *shared, convs, _signature(cnn[1]), heads, image.grid, scenario)
+            return ("image", *shared, convs, _signature(cnn[1]), _head_signature(image.head), image.grid, scenario)
         if (
             belief.kind != "bimdn"
             or not isinstance(belief.net, BiMDN)
@@ -272,7 +278,7 @@ class StackedActors:
         ):
             return None
         net = belief.net
-        heads = tuple(_signature(list(getattr(net.head, name))) for name in ("weight_head", "mean_head"))
+        heads = _head_signature(net.head)
         return ("bimdn", *shared, net.lstm.hidden_size, net.components, _signature(list(net.trunk)), heads)
 
     @classmethod

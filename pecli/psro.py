@@ -17,7 +17,6 @@ one ``iter-NN/`` per iteration (``nash.json``, ``against-pursuer/``, ``against-e
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -27,7 +26,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from pecli.errors import PecliError
-from pecli.exploit import MAX_CPU_MINUTES, ExploitJob, ExploitResult, PairResult, exploit, pair_games
+from pecli.exploit import MAX_CPU_MINUTES, ExploitJob, ExploitResult, PairResult, check_cpu_minutes, exploit, pair_games
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
 from pecli.metagame import MetaGame, solve
@@ -78,7 +77,7 @@ class Iteration(_Record):
     best_evader: float = Field(ge=0.0, le=1.0)  # the pursuer mixture's capture rate against the BR evader
     nash_conv: float = Field(ge=-1.0, le=1.0)
     interval: list[float] = Field(min_length=2, max_length=2)  # NashConv's 95 % interval
-    joined: dict[str, str]  # role -> the new member's checkpoint (out-relative)
+    joined: dict[Role, str]  # the new member's checkpoint (out-relative) of each role
 
 
 class PsroRecord(_Record):
@@ -120,8 +119,7 @@ def _stored(spec: str, out: Path, folder: Path) -> str:
 def _check(job: PsroJob) -> None:
     if not 1 <= job.iterations <= MAX_ITERATIONS:
         raise PecliError(f"--iterations must be from 1 to {MAX_ITERATIONS}, not {job.iterations}")
-    if not 0 < job.cpu_minutes <= MAX_CPU_MINUTES or not math.isfinite(job.cpu_minutes):
-        raise PecliError(f"--cpu-minutes must be in (0, {MAX_CPU_MINUTES:g}], not {job.cpu_minutes}")
+    check_cpu_minutes(job.cpu_minutes)
     if not job.seeds or len(set(job.seeds)) != len(job.seeds) or min(job.seeds) < 0:
         raise PecliError("--seeds: one or more different non-negative seeds")
     from pecli.match import MAX_EPISODES
@@ -179,8 +177,8 @@ def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str
     folder.mkdir(parents=True, exist_ok=True)
     specs = {
         name: _stored(spec, job.out, folder)
-        for role, names in (("pursuer", game.pursuers), ("evader", game.evaders))
-        for name, spec in zip(names, populations[role])  # type: ignore[index]
+        for names, members in ((game.pursuers, populations["pursuer"]), (game.evaders, populations["evader"]))
+        for name, spec in zip(names, members)
     }
     path = folder / NASH_FILE
     atomic_write_json(path, mixture_record(job.scenario, game, specs))
@@ -228,8 +226,8 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
         atomic_write_json(path, record.model_dump(mode="json"))
         populations: dict[Role, list[str]] = {"pursuer": [job.pursuer], "evader": [job.evader]}
         for done in record.iterations:
-            for role, checkpoint in done.joined.items():
-                populations[role].append(str(job.out / checkpoint))  # type: ignore[index]
+            for role, member in done.joined.items():
+                populations[role].append(str(job.out / member))
         for index in range(len(record.iterations) + 1, job.iterations + 1):
             folder = iteration_folder(job.out, index)
             report(
@@ -243,7 +241,7 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
             pair = PairResult(
                 f"nash:{folder}", f"nash:{folder}", captures, episodes, results["pursuer"], results["evader"]
             )
-            joined = {}
+            joined: dict[Role, str] = {}
             for answered, result in results.items():
                 learner = opponent_of(answered)
                 checkpoint = folder / f"against-{answered}" / result.strongest().checkpoint

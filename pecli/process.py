@@ -6,8 +6,12 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from multiprocessing import get_context
 from pathlib import Path
 from typing import NoReturn
 
@@ -65,3 +69,67 @@ def cpu_seconds(pid: int) -> float:
     """CPU time (user + system, s) a running process has used so far, from ``/proc`` (Linux)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def die_with(driver: int) -> None:
+    """Make this process end with ``driver`` (PID), whatever signal ends the driver.
+
+    On Linux the kernel sends this process SIGKILL when its parent dies (``PR_SET_PDEATHSIG``); elsewhere a thread
+    polls the parent. Ends at once if the driver died before the watch was set.
+    """
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    else:
+        threading.Thread(target=_watch_parent, args=(driver,), daemon=True).start()
+    if os.getppid() != driver:
+        os._exit(1)
+
+
+def _watch_parent(driver: int) -> None:
+    while os.getppid() == driver:
+        time.sleep(0.5)
+    os._exit(1)
+
+
+def _stoppable_worker_init(driver: int) -> None:
+    """A worker of :func:`stoppable_pool`: the driver alone decides when it stops (SIGINT ignored, so a Ctrl-C
+    reaches the driver only) and stops it with SIGTERM, which interrupts like Ctrl-C."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, interrupt)
+    die_with(driver)
+
+
+@contextmanager
+def stoppable_pool(workers: int, grace: float = 120.0) -> Iterator[ProcessPoolExecutor]:
+    """A pool of ``workers`` spawned processes for long tasks that keep their state when stopped (training runs).
+
+    The workers never outlive this process (:func:`die_with`). An exception in the ``with`` block (Ctrl-C, SIGTERM
+    turned into ``KeyboardInterrupt``, an error) cancels the tasks not started, stops the running ones like
+    Ctrl-C (SIGTERM: a training run commits its state and ends) and waits up to ``grace`` seconds for them before
+    killing what is left; a normal exit waits for every task.
+    """
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=get_context("spawn"),
+        initializer=_stoppable_worker_init,
+        initargs=(os.getpid(),),
+    )
+    try:
+        yield pool
+    except BaseException:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive() and process.pid is not None:
+                os.kill(process.pid, signal.SIGTERM)
+        deadline = time.monotonic() + grace
+        for process in processes:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+        pool.shutdown(wait=True)
+        raise
+    pool.shutdown(wait=True)

@@ -26,7 +26,15 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from pecli.errors import PecliError
-from pecli.exploit import MAX_CPU_MINUTES, ExploitJob, ExploitResult, PairResult, check_cpu_minutes, exploit, pair_games
+from pecli.exploit import (
+    MAX_CPU_MINUTES,
+    ExploitJob,
+    ExploitResult,
+    PairResult,
+    check_cpu_minutes,
+    exploit_all,
+    pair_games,
+)
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
 from pecli.metagame import MetaGame, solve
@@ -188,12 +196,13 @@ def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str
 def _responses(
     job: PsroJob, folder: Path, populations: dict[Role, list[str]], report: Callable[[str], None]
 ) -> dict[Role, ExploitResult]:
-    """The best responses to each side of the mixture in ``folder``, keyed by the role they answer."""
-    results = {}
+    """The best responses to each side of the mixture in ``folder``, keyed by the role they answer, trained in
+    ``job.workers`` processes at once."""
+    jobs = []
     for role in ROLES:
         newest = populations[opponent_of(role)][-1]  # the learner's population's newest member
         start = Path(newest) if job.warm and newest.lower().endswith(".zip") else None
-        results[role] = exploit(
+        jobs.append(
             ExploitJob(
                 target=f"nash:{folder}",
                 role=role,
@@ -204,10 +213,9 @@ def _responses(
                 warm_start=start,
                 fresh=start is None,
                 episodes=job.held_out,
-            ),
-            report,
+            )
         )
-    return results
+    return {exploit_job.role: result for exploit_job, result in zip(jobs, exploit_all(jobs, report, job.workers))}
 
 
 def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> list[Iteration]:

@@ -19,8 +19,6 @@ import os
 import random
 import signal
 import sys
-import threading
-import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -39,6 +37,7 @@ from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
 from pecli.policies.registry import BUILTINS, family_of
+from pecli.process import die_with
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
@@ -384,27 +383,10 @@ def _one_torch_thread() -> None:
 
 
 def _worker_init(driver: int) -> None:
-    """Make a worker process end with its ``driver`` (PID), whatever signal ends the driver.
-
-    On Linux the kernel sends the worker SIGKILL when its parent dies (``PR_SET_PDEATHSIG``); elsewhere
-    a thread polls the parent. Workers ignore SIGINT: the driver handles Ctrl-C and stops them.
-    """
+    """A pairing worker: it ends with its ``driver`` (:func:`pecli.process.die_with`) and ignores SIGINT, so
+    that the driver handles Ctrl-C and stops it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    else:
-        threading.Thread(target=_watch_parent, args=(driver,), daemon=True).start()
-    if os.getppid() != driver:  # the driver died before the watch was set
-        os._exit(1)
-
-
-def _watch_parent(driver: int) -> None:
-    while os.getppid() == driver:
-        time.sleep(0.5)
-    os._exit(1)
+    die_with(driver)
 
 
 @contextmanager

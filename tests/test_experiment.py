@@ -691,6 +691,30 @@ def test_a_groups_seeds_are_measured_as_one_mixed_pair(tmp_path: Path) -> None:
     assert (row["run"], row["group"], row["nash_conv"]) == ("none-league-mixed", "MADDPG", pytest.approx(0.7))
 
 
+def test_only_the_groups_mixed_pairs_train_together_in_the_workers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import pecli.experiment.exploit as experiment_exploit
+
+    out, _ = handed_over_tournament(tmp_path, [0, 1])
+    calls = []
+
+    def trained(jobs, report, workers):  # what would train, without training
+        calls.append(([(job.out.relative_to(out), job.role, job.warm_start) for job in jobs], workers))
+        return [f"result of {job.out.name}" for job in jobs]
+
+    monkeypatch.setattr(experiment_exploit, "exploit_all", trained)
+    monkeypatch.setattr(experiment_exploit, "pair_result", lambda jobs, results, folder: (folder.name, results))
+    found = experiment_exploit.exploit_experiment(out, mixtures=True, runs=False, workers=4, cpu_minutes=1.0)
+    mixed = Path("exploit/none-league-mixed")
+    assert calls == [([(mixed / "against-pursuer", "pursuer", None), (mixed / "against-evader", "evader", None)], 4)]
+    assert found == {
+        "none-league-mixed": ("none-league-mixed", ["result of against-pursuer", "result of against-evader"])
+    }
+    with pytest.raises(PecliError, match="no pair to measure"):
+        experiment_exploit.exploit_experiment(out, mixtures=False, runs=False)
+
+
 def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> None:
     result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "none")])
     assert result.exit_code == 1 and "holds no experiment" in result.output

@@ -1,4 +1,4 @@
-"""What pecli reads of other processes: their children and their CPU time."""
+"""What pecli reads of other processes (their children and CPU time), and the pool of workers that stop like Ctrl-C."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from pecli.process import cpu_seconds, descendants, live_parents
+from pecli.process import cpu_seconds, descendants, live_parents, stoppable_pool
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 
@@ -35,3 +35,17 @@ def test_a_child_and_its_child_are_descendants() -> None:
         child.kill()
         child.wait()
     assert child.pid not in live_parents()
+
+
+def test_a_stoppable_pool_interrupts_its_running_tasks_when_the_driver_stops(tmp_path: Path) -> None:
+    started, marker = time.monotonic(), tmp_path / "started"
+    with pytest.raises(RuntimeError, match="the driver stops"), stoppable_pool(1, grace=30.0) as pool:
+        # a task that would run a minute: the worker's Python waits on its child, as a training run would compute
+        future = pool.submit(subprocess.run, ["sh", "-c", f"touch {marker}; exec sleep 60"])
+        while not marker.exists():
+            time.sleep(0.05)
+        workers = [process.pid for process in pool._processes.values()]  # type: ignore[attr-defined]
+        raise RuntimeError("the driver stops")
+    assert isinstance(future.exception(timeout=5), KeyboardInterrupt)  # stopped like Ctrl-C, its own code ran on
+    assert time.monotonic() - started < 30  # not waited out, not killed at the end of the grace
+    assert not set(workers) & set(live_parents())

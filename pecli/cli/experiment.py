@@ -319,27 +319,46 @@ def exploit(
             help="Also each group's seeds as one pair of uniform mixtures (mix:...), into OUT/exploit/GROUP-mixed.",
         ),
     ] = False,
+    only_mixtures: Annotated[
+        bool,
+        typer.Option("--only-mixtures", help="Each group's mixed pair alone, not its runs one by one (the cheaper)."),
+    ] = False,
+    workers: Annotated[
+        int,
+        typer.Option(
+            "--workers", "-w", help="Responses trained at once, each in its own process (each keeps its CPU budget)."
+        ),
+    ] = 1,
 ) -> None:
     """Best responses to every run's kept pursuer and evader, then the report again with each run's NashConv.
 
-    For each run, in turn: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
+    For each run: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
     [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. With [bold]--mixtures[/], then each group's seeds
     played as one mixed player (each game one seed's, drawn uniformly): a population is harder to exploit
-    than any of its members. Runs in this process, one response at a time; stopping is safe and the same command
-    continues.
+    than any of its members; [bold]--only-mixtures[/] measures those alone, a third of the cost with three seeds.
+    [bold]--workers[/] trains that many responses at once; stopping is safe and the same command continues.
     """
     from pecli.experiment.exploit import exploit_experiment
     from pecli.experiment.report import write_report
 
     require_batch(episodes, "play fewer")
     require_positive(seeds, "--seeds")
+    require_positive(workers, "--workers")
     settings = {"cpu_minutes": cpu_minutes, "seeds": tuple(range(seeds)), "episodes": episodes}
 
     def report(line: str) -> None:
         err_console.print(line, highlight=False, markup=False)
 
     with responses_stop():
-        exploit_experiment(out, report, warm=warm, mixtures=mixtures, **settings)
+        exploit_experiment(
+            out,
+            report,
+            warm=warm,
+            mixtures=mixtures or only_mixtures,
+            runs=not only_mixtures,
+            workers=workers,
+            **settings,
+        )
     paths = write_report(out)
     err_console.print("wrote " + ", ".join(str(p) for p in paths), highlight=False)
 

@@ -67,7 +67,9 @@ def psro(
     held_out: Annotated[
         int, typer.Option("--held-out", help="Held-out games of each best response against the mixture.")
     ] = 500,
-    workers: Annotated[int, typer.Option("--workers", "-w", help="Processes playing the meta-game.")] = 1,
+    workers: Annotated[
+        int, typer.Option("--workers", "-w", help="Processes playing the meta-game and training the best responses.")
+    ] = 1,
     out: Annotated[Path, typer.Option("--out", help="The PSRO folder (a re-run continues it).")] = Path("runs/psro"),
     as_json: Annotated[bool, typer.Option("--json", help="Print the iterations as JSON.")] = False,
 ) -> None:

@@ -10,13 +10,17 @@ the value ``v`` of the game. As in PSRO (Lanctot et al. 2017), the same quantiti
   the zoo holds it; an evader's is ``max_i M[i, j] - v``;
 * the NashConv of a pair of mixtures is ``max_i (M y)_i - min_j (x M)_j``: 0 exactly for an equilibrium.
 
+A meta-solver (PSRO's term; OpenSpiel names the same three) picks the mixture of a population that the other
+side's next best response trains against: ``nash`` the equilibrium's, ``uniform`` every member alike (fictitious
+play), ``last`` the newest member alone (iterated best response, i.e. self-play of whole players).
+
 Everything here is NumPy and SciPy (HiGHS through :func:`scipy.optimize.linprog`), no torch.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linprog
@@ -32,9 +36,14 @@ class MetaGame:
     pursuers: tuple[str, ...]
     evaders: tuple[str, ...]
     matrix: np.ndarray  # (pursuers, evaders), capture rates in [0, 1]
-    pursuer_mixture: np.ndarray  # (pursuers,): the maximin mixture
-    evader_mixture: np.ndarray  # (evaders,): the minimax mixture
+    pursuer_mixture: np.ndarray  # (pursuers,): the maximin mixture (or a meta-solver's: with_meta_solvers)
+    evader_mixture: np.ndarray  # (evaders,): the minimax mixture (or a meta-solver's)
     value: float  # the capture rate the equilibrium guarantees both ways
+
+    @property
+    def mixtures_rate(self) -> float:
+        """The capture rate of the two mixtures against each other (the value, for the equilibrium's)."""
+        return min(1.0, max(0.0, float(self.pursuer_mixture @ self.matrix @ self.evader_mixture)))
 
     def exploitability(self) -> dict[str, float]:
         """Each player's exploitability within the zoo (0 for a player that is itself an equilibrium strategy),
@@ -92,6 +101,32 @@ def solve(pursuers: Sequence[str], evaders: Sequence[str], matrix: np.ndarray) -
     x, value = maximin(m)
     y, minus_value = maximin(1.0 - m.T)  # the evader maximises the escape rate 1 - M
     return MetaGame(tuple(pursuers), tuple(evaders), m, x, y, value=0.5 * (value + 1.0 - minus_value))
+
+
+META_SOLVERS = ("nash", "uniform", "last")
+
+
+def with_meta_solvers(game: MetaGame, pursuers: str, evaders: str) -> MetaGame:
+    """``game`` whose pursuer and evader mixtures are those of the meta-solvers named (:data:`META_SOLVERS`), each
+    population in the order its members joined (``last``: the final row or column); the value and every player's
+    exploitability stay the equilibrium's."""
+
+    def mixture(solver: str, nash: np.ndarray) -> np.ndarray:
+        if solver == "nash":
+            return nash
+        if solver == "uniform":
+            return np.full(len(nash), 1.0 / len(nash))
+        if solver == "last":
+            return np.eye(len(nash))[-1]
+        raise ValueError(f"no meta-solver '{solver}' (known: {', '.join(META_SOLVERS)})")
+
+    if (pursuers, evaders) == ("nash", "nash"):
+        return game
+    return replace(
+        game,
+        pursuer_mixture=mixture(pursuers, game.pursuer_mixture),
+        evader_mixture=mixture(evaders, game.evader_mixture),
+    )
 
 
 def nash_conv(matrix: np.ndarray, pursuer_mixture: np.ndarray, evader_mixture: np.ndarray) -> float:

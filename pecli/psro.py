@@ -2,17 +2,20 @@
 
 Two populations start from the players given (e.g. a league run's handed-over pursuer and evader). Each
 iteration plays the meta-game of the populations (every pursuer against every evader, cached, so an iteration
-plays only its new members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes it as
-``OUT/iter-NN/nash.json``, a player as ``nash:OUT/iter-NN``. Then one best response per role trains against the
-other side's Nash mixture on the real game (:mod:`pecli.exploit`: from scratch, or warm-started from the newest
-checkpoint of its own population), and its held-out games against that mixture measure the mixtures' NashConv,
+plays only its new members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes each side's
+mixture, by its meta-solver, as ``OUT/iter-NN/nash.json``, a player as ``nash:OUT/iter-NN``: the equilibrium's
+(``nash``, PSRO's double oracle), every member alike (``uniform``, fictitious play) or the newest member alone
+(``last``, iterated best response). Then one best response per role trains against the other side's mixture on
+the real game (:mod:`pecli.exploit`: from scratch, or warm-started from the newest checkpoint of its own
+population), and its held-out games against that mixture measure the mixtures' NashConv,
 ``capture(BR pursuer, evader mixture) - capture(pursuer mixture, BR evader)`` (approximate, as the responses
 are). The strongest response of each role joins its population, and the next iteration solves the larger game.
 
-NashConv per iteration is what PSRO drives down; the last iteration's mixture is the player to hand over. The
-output folder holds ``psro.json`` (the job and every finished iteration), ``meta-game/`` (the pairings' cache),
-one ``iter-NN/`` per iteration (``nash.json``, ``against-pursuer/``, ``against-evader/``, ``pair.json``, as
-``pecli exploit --pair`` writes them) and ``nash-conv.png``. A stopped command continues where it stopped.
+NashConv per iteration is what PSRO drives down; the last iteration's mixture is the player to hand over (with
+``last``, one network: the newest member). The output folder holds ``psro.json`` (the job and every finished
+iteration), ``meta-game/`` (the pairings' cache), one ``iter-NN/`` per iteration (``nash.json``,
+``against-pursuer/``, ``against-evader/``, ``pair.json``, as ``pecli exploit --pair`` writes them) and
+``nash-conv.png``. A stopped command continues where it stopped.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -37,7 +41,7 @@ from pecli.exploit import (
 )
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
-from pecli.metagame import MetaGame, solve
+from pecli.metagame import META_SOLVERS, MetaGame, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.roles import ROLES, Role, opponent_of
@@ -54,8 +58,9 @@ class PsroJob:
     """PSRO from the pair ``(pursuer, evader)`` in ``scenario``, into ``out``.
 
     Each iteration trains ``len(seeds)`` responses per role of ``cpu_minutes`` each (``warm``: from the newest
-    checkpoint of the learner's population, where it holds one), measures them in ``held_out`` games against
-    the mixture, and plays every new pairing of the meta-game ``episodes`` times.
+    checkpoint of the learner's population, where it holds one) against the other side's mixture by its
+    meta-solver (``pursuer_solver``, ``evader_solver``: one of :data:`pecli.metagame.META_SOLVERS`), measures them
+    in ``held_out`` games against that mixture, and plays every new pairing of the meta-game ``episodes`` times.
     """
 
     pursuer: str
@@ -69,6 +74,8 @@ class PsroJob:
     episodes: int = 200
     held_out: int = 500
     workers: int = 1
+    pursuer_solver: str = "nash"
+    evader_solver: str = "nash"
 
 
 class _Record(BaseModel):
@@ -78,7 +85,7 @@ class _Record(BaseModel):
 class Iteration(_Record):
     """One finished iteration, as ``psro.json`` keeps it."""
 
-    value: float = Field(ge=0.0, le=1.0)  # the meta-game's value: the mixtures' capture rate against each other
+    value: float = Field(ge=0.0, le=1.0)  # the mixtures' capture rate against each other in the meta-game
     pursuer_mixture: dict[str, float]
     evader_mixture: dict[str, float]
     best_pursuer: float = Field(ge=0.0, le=1.0)  # the BR pursuer's capture rate against the evader mixture
@@ -101,6 +108,8 @@ class PsroRecord(_Record):
     warm: bool
     episodes: int = Field(ge=1, le=10**6)
     held_out: int = Field(ge=1, le=10**7)
+    pursuer_solver: Literal["nash", "uniform", "last"] = "nash"
+    evader_solver: Literal["nash", "uniform", "last"] = "nash"
     iterations: list[Iteration] = Field(default_factory=list, max_length=MAX_ITERATIONS)
 
     def settings(self) -> dict:
@@ -128,6 +137,9 @@ def _check(job: PsroJob) -> None:
     if not 1 <= job.iterations <= MAX_ITERATIONS:
         raise PecliError(f"--iterations must be from 1 to {MAX_ITERATIONS}, not {job.iterations}")
     check_cpu_minutes(job.cpu_minutes)
+    for solver in (job.pursuer_solver, job.evader_solver):
+        if solver not in META_SOLVERS:
+            raise PecliError(f"no meta-solver '{solver}' (known: {', '.join(META_SOLVERS)})")
     if not job.seeds or len(set(job.seeds)) != len(job.seeds) or min(job.seeds) < 0:
         raise PecliError("--seeds: one or more different non-negative seeds")
     from pecli.match import MAX_EPISODES
@@ -153,11 +165,14 @@ def _fresh_record(job: PsroJob) -> PsroRecord:
         warm=job.warm,
         episodes=job.episodes,
         held_out=job.held_out,
+        pursuer_solver=job.pursuer_solver,  # type: ignore[arg-type]
+        evader_solver=job.evader_solver,  # type: ignore[arg-type]
     )
 
 
 def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable[[str], None]) -> MetaGame:
-    """Every pursuer of the populations against every evader (cached in ``out/meta-game``), solved."""
+    """Every pursuer of the populations against every evader (cached in ``out/meta-game``), solved, with each
+    side's mixture by the job's meta-solvers."""
     grid = pairing_results(
         job.scenario,
         populations["pursuer"],
@@ -177,11 +192,11 @@ def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable
         ]
     )
     names = {role: [f"{role}-{k}" for k in range(len(populations[role]))] for role in ROLES}
-    return solve(names["pursuer"], names["evader"], matrix)
+    return with_meta_solvers(solve(names["pursuer"], names["evader"], matrix), job.pursuer_solver, job.evader_solver)
 
 
 def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str]], folder: Path) -> Path:
-    """``folder/nash.json``: each side's equilibrium members (``nash:FOLDER`` plays it)."""
+    """``folder/nash.json``: each side's mixture (``nash:FOLDER`` plays it)."""
     folder.mkdir(parents=True, exist_ok=True)
     specs = {
         name: _stored(spec, job.out, folder)
@@ -256,7 +271,7 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
                 populations[learner].append(str(checkpoint))
                 joined[learner] = str(checkpoint.relative_to(job.out))
             iteration = Iteration(
-                value=game.value,
+                value=game.mixtures_rate,
                 pursuer_mixture=game.support("pursuer"),
                 evader_mixture=game.support("evader"),
                 best_pursuer=pair.against_evader.strongest().capture_rate,
@@ -298,7 +313,7 @@ def draw_nash_conv(iterations: Sequence[Iteration], path: Path) -> Path | None:
     ax.errorbar(x, nash_conv, yerr=[nash_conv - low, high - nash_conv], marker="o", capsize=3, label="NashConv")
     ax.plot(x, [it.best_pursuer for it in iterations], "^--", label="BR pursuer vs evader mixture")
     ax.plot(x, [it.best_evader for it in iterations], "v--", label="pursuer mixture vs BR evader")
-    ax.plot(x, [it.value for it in iterations], "s:", label="meta-game value")
+    ax.plot(x, [it.value for it in iterations], "s:", label="the mixtures against each other")
     ax.set_xlabel("PSRO iteration")
     ax.set_ylabel("capture rate / NashConv")
     ax.set_xticks(x)

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 from pecli.errors import PolicyError
-from pecli.metagame import maximin, nash_conv, solve
+from pecli.metagame import maximin, nash_conv, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.scenario import Scenario
 
@@ -165,3 +165,16 @@ def test_nash_conv_is_what_the_best_replies_gain_on_a_pair_of_mixtures() -> None
     assert pure == pytest.approx(0.9 - 0.2)  # the best pursuer against x catches 0.9; the best evader holds a to 0.2
     game = solve(["a", "b"], ["x", "y"], m)
     assert nash_conv(m, game.pursuer_mixture, game.evader_mixture) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_a_meta_solver_picks_the_mixture_and_leaves_the_equilibriums_measures() -> None:
+    game = solve(["p0", "p1"], ["e0", "e1", "e2"], np.array([[0.9, 0.2, 0.5], [0.1, 0.8, 0.5]]))
+    assert with_meta_solvers(game, "nash", "nash") is game
+    other = with_meta_solvers(game, "last", "uniform")
+    assert other.support("pursuer") == {"p1": 1.0}  # the newest member alone
+    assert other.evader_mixture == pytest.approx([1 / 3] * 3)
+    assert other.mixtures_rate == pytest.approx((0.1 + 0.8 + 0.5) / 3)
+    assert (other.value, other.exploitability()) == (game.value, game.exploitability())
+    assert game.mixtures_rate == pytest.approx(game.value)
+    with pytest.raises(ValueError, match="no meta-solver 'best'"):
+        with_meta_solvers(game, "best", "nash")

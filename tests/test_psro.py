@@ -48,6 +48,27 @@ def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_pa
     other = PsroJob("pure-pursuit", "rash", scenario, out, iterations=2, cpu_minutes=0.015, episodes=10, held_out=20)
     with pytest.raises(Exception, match="other players or settings"):
         psro(other)
+    settings = {"iterations": 2, "cpu_minutes": 0.015, "episodes": 10, "held_out": 20}
+    with pytest.raises(Exception, match="other players or settings"):  # another meta-solver is another PSRO
+        psro(PsroJob("pure-pursuit", "hider", scenario, out, pursuer_solver="last", **settings))  # type: ignore[arg-type]
+
+
+def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) -> None:
+    from pecli.psro import meta_game, write_mixture
+
+    scenario = load_scenario(str(tiny))
+    job = PsroJob(
+        "pure-pursuit", "hider", scenario, tmp_path, episodes=4, pursuer_solver="last", evader_solver="uniform"
+    )
+    populations = {"pursuer": ["pure-pursuit", "interceptor"], "evader": ["hider", "rash", "greedy"]}
+    game = meta_game(job, populations, lambda line: None)  # type: ignore[arg-type]
+    write_mixture(job, game, populations, tmp_path / "iter-01")  # type: ignore[arg-type]
+    record = read_nash(tmp_path / "iter-01" / "nash.json")
+    assert [(m.spec, m.weight) for m in record.pursuer] == [("interceptor", 1.0)]  # the newest pursuer alone
+    assert sorted(m.spec for m in record.evader) == ["greedy", "hider", "rash"]
+    assert [m.weight for m in record.evader] == pytest.approx([1 / 3] * 3)
+    with pytest.raises(Exception, match="no meta-solver 'best'"):
+        psro(PsroJob("pure-pursuit", "hider", scenario, tmp_path / "p", evader_solver="best"))
 
 
 @pytest.mark.parametrize(

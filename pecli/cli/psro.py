@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -21,11 +22,19 @@ from pecli.cli.common import (
 from pecli.cli.exploit import responses_stop
 
 
+class MetaSolver(str, Enum):
+    """Which mixture of a population the other side's responses train against (pecli.metagame.META_SOLVERS)."""
+
+    nash = "nash"
+    uniform = "uniform"
+    last = "last"
+
+
 def _table(iterations: list) -> Table:  # noqa: ANN001 (pecli.psro loads torch: imported in the command)
     table = Table(
-        title="PSRO: each iteration's Nash mixtures and the best responses to them",
+        title="PSRO: each iteration's mixtures and the best responses to them",
         caption="NashConv = capture(BR pursuer vs evader mixture) − capture(pursuer mixture vs BR evader), 95 % "
-        "interval over the held-out games; value: the mixtures against each other in the meta-game",
+        "interval over the held-out games; value: the two mixtures against each other in the meta-game",
     )
     for column in ("iteration", "pursuers", "evaders", "value", "BR pursuer", "vs BR evader", "NashConv", "95 %"):
         table.add_column(column, justify="left" if column in ("pursuers", "evaders") else "right", overflow="fold")
@@ -63,6 +72,18 @@ def psro(
             help="Start each best response from its population's newest checkpoint (--fresh: from scratch).",
         ),
     ] = True,
+    pursuer_mixture: Annotated[
+        MetaSolver,
+        typer.Option(
+            "--pursuer-mixture",
+            help="The pursuers the evaders' responses train against and that are handed over: the meta-game's "
+            "Nash mixture, all alike (uniform) or the newest alone (last: one network).",
+        ),
+    ] = MetaSolver.nash,
+    evader_mixture: Annotated[
+        MetaSolver,
+        typer.Option("--evader-mixture", help="The same for the evaders that the pursuers' responses train against."),
+    ] = MetaSolver.nash,
     episodes: Annotated[int, typer.Option("--episodes", "-n", help="Games per pairing of the meta-game.")] = 200,
     held_out: Annotated[
         int, typer.Option("--held-out", help="Held-out games of each best response against the mixture.")
@@ -73,15 +94,16 @@ def psro(
     out: Annotated[Path, typer.Option("--out", help="The PSRO folder (a re-run continues it).")] = Path("runs/psro"),
     as_json: Annotated[bool, typer.Option("--json", help="Print the iterations as JSON.")] = False,
 ) -> None:
-    """PSRO from PURSUER and EVADER: grow both populations with trained best responses until their Nash mixtures
+    """PSRO from PURSUER and EVADER: grow both populations with trained best responses until their mixtures
     are hard to exploit.
 
     Each iteration plays the populations' meta-game (every pursuer against every evader, [bold]--episodes[/] games,
-    cached), solves its Nash equilibrium and writes it as OUT/iter-NN/nash.json (a player as nash:OUT/iter-NN).
-    A best response of each role then trains [bold]--cpu-minutes[/] against the other side's mixture on the real
-    game, and its [bold]--held-out[/] games measure the mixtures' NashConv. The strongest response of each role
-    joins its population. Stopping is safe: the same command continues; a larger [bold]--iterations[/] goes on.
-    Writes psro.json and nash-conv.png into [bold]--out[/].
+    cached), solves its Nash equilibrium and writes each side's mixture (the equilibrium's, or by
+    [bold]--pursuer-mixture[/] / [bold]--evader-mixture[/]) as OUT/iter-NN/nash.json (a player as
+    nash:OUT/iter-NN). A best response of each role then trains [bold]--cpu-minutes[/] against the other side's
+    mixture on the real game, and its [bold]--held-out[/] games measure the mixtures' NashConv. The strongest
+    response of each role joins its population. Stopping is safe: the same command continues; a larger
+    [bold]--iterations[/] goes on. Writes psro.json and nash-conv.png into [bold]--out[/].
     """
     from pecli.psro import PsroJob, iteration_folder
     from pecli.psro import psro as run_psro
@@ -103,6 +125,8 @@ def psro(
         episodes=episodes,
         held_out=held_out,
         workers=workers,
+        pursuer_solver=pursuer_mixture.value,
+        evader_solver=evader_mixture.value,
     )
 
     def report(line: str) -> None:

@@ -18,7 +18,6 @@ import json
 import os
 import random
 import signal
-import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -37,7 +36,7 @@ from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
 from pecli.policies.registry import BUILTINS, family_of
-from pecli.process import die_with
+from pecli.process import die_with, one_torch_thread
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
@@ -337,7 +336,7 @@ def play_pairing(
     captured, times = [], []
     p = resolve_policy(pursuer.spec, "pursuer", scenario)
     e = resolve_policy(evader.spec, "evader", scenario)
-    _one_torch_thread()
+    one_torch_thread()
     for seed in seeds:  # play_match reseeds both policies from the seed
         result, _ = play_match(scenario, p, e, episodes=episodes, seed=seed)
         captured.append(result.captured)
@@ -374,12 +373,6 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     ):
         return None  # not what a pairing can give: played again
     return result
-
-
-def _one_torch_thread() -> None:
-    """Run torch on one thread if a policy loaded it (small batched networks gain nothing from more)."""
-    if (torch := sys.modules.get("torch")) is not None:
-        torch.set_num_threads(1)
 
 
 def _worker_init(driver: int) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Literal, get_args
 
 import numpy as np
 from scipy.optimize import linprog
@@ -103,10 +104,11 @@ def solve(pursuers: Sequence[str], evaders: Sequence[str], matrix: np.ndarray) -
     return MetaGame(tuple(pursuers), tuple(evaders), m, x, y, value=0.5 * (value + 1.0 - minus_value))
 
 
-META_SOLVERS = ("nash", "uniform", "last")
+MetaSolver = Literal["nash", "uniform", "last"]
+META_SOLVERS: tuple[str, ...] = get_args(MetaSolver)
 
 
-def with_meta_solvers(game: MetaGame, pursuers: str, evaders: str) -> MetaGame:
+def with_meta_solvers(game: MetaGame, pursuers: MetaSolver, evaders: MetaSolver) -> MetaGame:
     """``game`` whose pursuer and evader mixtures are those of the meta-solvers named (:data:`META_SOLVERS`), each
     population in the order its members joined (``last``: the final row or column); the value and every player's
     exploitability stay the equilibrium's."""

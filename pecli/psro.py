@@ -24,7 +24,6 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -37,11 +36,11 @@ from pecli.exploit import (
     PairResult,
     check_cpu_minutes,
     exploit_all,
-    pair_games,
+    pair_result,
 )
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
-from pecli.metagame import META_SOLVERS, MetaGame, solve, with_meta_solvers
+from pecli.metagame import META_SOLVERS, MetaGame, MetaSolver, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.roles import ROLES, Role, opponent_of
@@ -74,8 +73,8 @@ class PsroJob:
     episodes: int = 200
     held_out: int = 500
     workers: int = 1
-    pursuer_solver: str = "nash"
-    evader_solver: str = "nash"
+    pursuer_solver: MetaSolver = "nash"
+    evader_solver: MetaSolver = "nash"
 
 
 class _Record(BaseModel):
@@ -108,8 +107,8 @@ class PsroRecord(_Record):
     warm: bool
     episodes: int = Field(ge=1, le=10**6)
     held_out: int = Field(ge=1, le=10**7)
-    pursuer_solver: Literal["nash", "uniform", "last"] = "nash"
-    evader_solver: Literal["nash", "uniform", "last"] = "nash"
+    pursuer_solver: MetaSolver = "nash"
+    evader_solver: MetaSolver = "nash"
     iterations: list[Iteration] = Field(default_factory=list, max_length=MAX_ITERATIONS)
 
     def settings(self) -> dict:
@@ -146,7 +145,8 @@ def _check(job: PsroJob) -> None:
 
     if not 1 <= job.episodes <= MAX_EPISODES or not 1 <= job.held_out <= MAX_EPISODES:
         raise PecliError(f"the meta-game's and the held-out games' episodes must be from 1 to {MAX_EPISODES:,}")
-    for role, spec in (("pursuer", job.pursuer), ("evader", job.evader)):
+    firsts: dict[Role, str] = {"pursuer": job.pursuer, "evader": job.evader}
+    for role, spec in firsts.items():
         resolve_policy(spec, role, job.scenario, seed=0)  # plays this game and role, or one line why not
 
 
@@ -165,8 +165,8 @@ def _fresh_record(job: PsroJob) -> PsroRecord:
         warm=job.warm,
         episodes=job.episodes,
         held_out=job.held_out,
-        pursuer_solver=job.pursuer_solver,  # type: ignore[arg-type]
-        evader_solver=job.evader_solver,  # type: ignore[arg-type]
+        pursuer_solver=job.pursuer_solver,
+        evader_solver=job.evader_solver,
     )
 
 
@@ -210,27 +210,25 @@ def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str
 
 def _responses(
     job: PsroJob, folder: Path, populations: dict[Role, list[str]], report: Callable[[str], None]
-) -> dict[Role, ExploitResult]:
-    """The best responses to each side of the mixture in ``folder``, keyed by the role they answer, trained in
-    ``job.workers`` processes at once."""
-    jobs = []
+) -> PairResult:
+    """The best responses to each side of the mixture in ``folder`` (trained in ``job.workers`` processes at once)
+    and the mixtures' own games: their NashConv."""
+    jobs: dict[Role, ExploitJob] = {}
     for role in ROLES:
         newest = populations[opponent_of(role)][-1]  # the learner's population's newest member
         start = Path(newest) if job.warm and newest.lower().endswith(".zip") else None
-        jobs.append(
-            ExploitJob(
-                target=f"nash:{folder}",
-                role=role,
-                scenario=job.scenario,
-                out=folder / f"against-{role}",
-                cpu_minutes=job.cpu_minutes,
-                seeds=tuple(job.seeds),
-                warm_start=start,
-                fresh=start is None,
-                episodes=job.held_out,
-            )
+        jobs[role] = ExploitJob(
+            target=f"nash:{folder}",
+            role=role,
+            scenario=job.scenario,
+            out=folder / f"against-{role}",
+            cpu_minutes=job.cpu_minutes,
+            seeds=tuple(job.seeds),
+            warm_start=start,
+            fresh=start is None,
+            episodes=job.held_out,
         )
-    return {exploit_job.role: result for exploit_job, result in zip(jobs, exploit_all(jobs, report, job.workers))}
+    return pair_result(jobs, exploit_all(list(jobs.values()), report, job.workers), folder)
 
 
 def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> list[Iteration]:
@@ -259,13 +257,10 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
             )
             game = meta_game(job, populations, report)
             write_mixture(job, game, populations, folder)
-            results = _responses(job, folder, populations, report)
-            captures, episodes = pair_games(f"nash:{folder}", f"nash:{folder}", job.scenario, folder, job.held_out)
-            pair = PairResult(
-                f"nash:{folder}", f"nash:{folder}", captures, episodes, results["pursuer"], results["evader"]
-            )
+            pair = _responses(job, folder, populations, report)
             joined: dict[Role, str] = {}
-            for answered, result in results.items():
+            answers: dict[Role, ExploitResult] = {"pursuer": pair.against_pursuer, "evader": pair.against_evader}
+            for answered, result in answers.items():
                 learner = opponent_of(answered)
                 checkpoint = folder / f"against-{answered}" / result.strongest().checkpoint
                 populations[learner].append(str(checkpoint))

@@ -54,7 +54,11 @@ def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_pa
 
 
 def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) -> None:
+    from pecli.cli.psro import MetaSolver
+    from pecli.metagame import META_SOLVERS
     from pecli.psro import meta_game, write_mixture
+
+    assert tuple(choice.value for choice in MetaSolver) == META_SOLVERS  # the command offers every meta-solver
 
     scenario = load_scenario(str(tiny))
     job = PsroJob(

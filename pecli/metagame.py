@@ -24,9 +24,10 @@ from dataclasses import dataclass, replace
 from typing import Literal, get_args
 
 import numpy as np
-from scipy.optimize import linprog
 
 WEIGHT_FLOOR = 1e-9  # mixture weights below this are LP round-off, not play
+MetaSolver = Literal["nash", "uniform", "last"]
+META_SOLVERS: tuple[str, ...] = get_args(MetaSolver)
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,8 @@ class MetaGame:
     pursuer_mixture: np.ndarray  # (pursuers,): the maximin mixture (or a meta-solver's: with_meta_solvers)
     evader_mixture: np.ndarray  # (evaders,): the minimax mixture (or a meta-solver's)
     value: float  # the capture rate the equilibrium guarantees both ways
+    pursuer_solver: MetaSolver = "nash"  # the meta-solver of pursuer_mixture (with_meta_solvers)
+    evader_solver: MetaSolver = "nash"
 
     @property
     def mixtures_rate(self) -> float:
@@ -79,6 +82,8 @@ def maximin(matrix: np.ndarray) -> tuple[np.ndarray, float]:
 
     maximise v subject to ``sum_i x_i M[i, j] >= v`` for every column ``j``, ``sum x = 1``, ``x >= 0``.
     """
+    from scipy.optimize import linprog  # imported here: reading a mixture's file needs no SciPy
+
     m = check_matrix(matrix)
     rows, columns = m.shape
     cost = np.zeros(rows + 1)
@@ -104,10 +109,6 @@ def solve(pursuers: Sequence[str], evaders: Sequence[str], matrix: np.ndarray) -
     return MetaGame(tuple(pursuers), tuple(evaders), m, x, y, value=0.5 * (value + 1.0 - minus_value))
 
 
-MetaSolver = Literal["nash", "uniform", "last"]
-META_SOLVERS: tuple[str, ...] = get_args(MetaSolver)
-
-
 def with_meta_solvers(game: MetaGame, pursuers: MetaSolver, evaders: MetaSolver) -> MetaGame:
     """``game`` whose pursuer and evader mixtures are those of the meta-solvers named (:data:`META_SOLVERS`), each
     population in the order its members joined (``last``: the final row or column); the value and every player's
@@ -128,6 +129,8 @@ def with_meta_solvers(game: MetaGame, pursuers: MetaSolver, evaders: MetaSolver)
         game,
         pursuer_mixture=mixture(pursuers, game.pursuer_mixture),
         evader_mixture=mixture(evaders, game.evader_mixture),
+        pursuer_solver=pursuers,
+        evader_solver=evaders,
     )
 
 

@@ -100,6 +100,7 @@ def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(
     weights = {m["name"]: m["weight"] for m in record["pursuer"]}
     assert set(weights) <= {"pure-pursuit", "interceptor"} and sum(weights.values()) == pytest.approx(1.0)
     assert set(record["exploitability"]) == {"pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter"}
+    assert record["solvers"] == {"pursuer": "nash", "evader": "nash"}
     mixture = resolve_policy(f"nash:{out}", "evader", quick, seed=0)
     assert sorted(mixture.names) == sorted(m["name"] for m in record["evader"])
     played = runner.invoke(
@@ -172,6 +173,7 @@ def test_a_meta_solver_picks_the_mixture_and_leaves_the_equilibriums_measures() 
     assert with_meta_solvers(game, "nash", "nash") is game
     other = with_meta_solvers(game, "last", "uniform")
     assert other.support("pursuer") == {"p1": 1.0}  # the newest member alone
+    assert (other.pursuer_solver, other.evader_solver, game.pursuer_solver) == ("last", "uniform", "nash")
     assert other.evader_mixture == pytest.approx([1 / 3] * 3)
     assert other.mixtures_rate == pytest.approx((0.1 + 0.8 + 0.5) / 3)
     assert (other.value, other.exploitability()) == (game.value, game.exploitability())

@@ -71,6 +71,7 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     assert [(m.spec, m.weight) for m in record.pursuer] == [("interceptor", 1.0)]  # the newest pursuer alone
     assert sorted(m.spec for m in record.evader) == ["greedy", "hider", "rash"]
     assert [m.weight for m in record.evader] == pytest.approx([1 / 3] * 3)
+    assert record.solvers == {"pursuer": "last", "evader": "uniform"}  # the file says which mixtures it holds
     with pytest.raises(Exception, match="no meta-solver 'best'"):
         psro(PsroJob("pure-pursuit", "hider", scenario, tmp_path / "p", evader_solver="best"))
 

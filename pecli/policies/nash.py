@@ -14,17 +14,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pecli.errors import PolicyError
+from pecli.metagame import MetaGame, MetaSolver
 from pecli.policies.base import Policy
 from pecli.roles import Role
 from pecli.scenario import Scenario
-
-if TYPE_CHECKING:
-    from pecli.metagame import MetaGame
 
 NASH_FILE = "nash.json"
 MAX_MEMBERS = 10_000
@@ -52,11 +50,13 @@ class NashRecord(_Record):
     pursuer: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     evader: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
+    solvers: dict[Role, MetaSolver] = Field(default_factory=lambda: {"pursuer": "nash", "evader": "nash"})
 
 
 def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str]) -> dict:
-    """What ``nash.json`` holds: each side's equilibrium members of ``game`` with their policy strings (``specs``,
-    by player name) and weights, the game's value and every player's exploitability within it."""
+    """What ``nash.json`` holds: each side's mixture of ``game`` (the equilibrium's, or a meta-solver's: ``solvers``)
+    with its members' policy strings (``specs``, by player name) and weights, the game's value and every player's
+    exploitability within it."""
 
     def members(role: str) -> list[dict]:
         return [{"name": name, "spec": specs[name], "weight": weight} for name, weight in game.support(role).items()]
@@ -69,6 +69,7 @@ def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str])
         "pursuer": members("pursuer"),
         "evader": members("evader"),
         "exploitability": game.exploitability(),
+        "solvers": {"pursuer": game.pursuer_solver, "evader": game.evader_solver},
     }
 
 

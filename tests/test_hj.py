@@ -160,6 +160,10 @@ def test_bad_problems_are_refused(point_mass: Scenario, paper: Scenario) -> None
         Problem.for_scenario(point_mass, sizes=(2, 11))
     with pytest.raises(ConfigError, match="unknown order"):
         Problem.for_scenario(point_mass, order="sideways")  # type: ignore[arg-type]
+    huge = Problem.for_scenario(point_mass, sizes=(100_000, 100_000))  # 1e40 nodes: more than an int64 holds
+    assert huge.grid.size == 100_001**4 * 100_000**4
+    with pytest.raises(ConfigError, match="use a coarser --grid"):
+        solve_with_capture_steps(huge)
 
 
 def test_the_hj_reachability_backend_says_how_to_install_it(point_mass: Scenario, monkeypatch) -> None:
@@ -210,6 +214,9 @@ def test_a_solution_file_round_trips_and_refuses_other_games(
         coarse.save(tmp_path / "s.txt")
     with pytest.raises(SolutionError, match="no HJ solution"):
         Solution.load(tmp_path / "missing.npz")
+    (tmp_path / "text.npz").write_text("not an archive")  # NumPy alone would offer to unpickle it
+    with pytest.raises(SolutionError, match="not a .npz archive"):
+        Solution.load(tmp_path / "text.npz")
 
 
 # ---------------------------------------------------------------------- policies

@@ -13,11 +13,12 @@ from pathlib import Path
 import pecli
 
 ROOT = Path(pecli.__file__).parent
+PACKAGES = ("pecli", "wrappers")  # the training views sit beside pecli, below its learning code
 
 
 def _modules() -> dict[str, Path]:
     modules = {}
-    for path in ROOT.rglob("*.py"):
+    for path in (file for package in PACKAGES for file in (ROOT.parent / package).rglob("*.py")):
         parts = path.relative_to(ROOT.parent).with_suffix("").parts
         name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
         modules[name] = path
@@ -25,7 +26,8 @@ def _modules() -> dict[str, Path]:
 
 
 def _imports(name: str, path: Path) -> set[str]:
-    """Every pecli module ``name`` imports (a name imported from a package counts as its submodule if one)."""
+    """Every pecli (or wrappers) module ``name`` imports (a name imported from a package counts as its submodule
+    if one)."""
     found = set()
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
@@ -39,7 +41,7 @@ def _imports(name: str, path: Path) -> set[str]:
             )
             found.add(base)
             found.update(f"{base}.{alias.name}" for alias in node.names)
-    return {imported for imported in found if imported == "pecli" or imported.startswith("pecli.")}
+    return {imported for imported in found if imported.partition(".")[0] in PACKAGES}
 
 
 def _graph(unit) -> dict[str, set[str]]:
@@ -50,7 +52,7 @@ def _graph(unit) -> dict[str, set[str]]:
             while imported not in modules:
                 imported = imported.rpartition(".")[0]
             source, target = unit(name), unit(imported)
-            if imported != "pecli" and source != target and not source.startswith(target + "."):
+            if imported not in PACKAGES and source != target and not source.startswith(target + "."):
                 graph[source].add(target)
     return graph
 
@@ -92,7 +94,8 @@ def test_no_module_imports_itself_back():
 
 
 def test_packages_are_layered():
-    """``pecli.game`` ← ``pecli.belief`` ← ``pecli.models`` ← ``pecli.policies`` ← ``pecli.rl`` ← ... never back."""
+    """``pecli.game`` ← ``pecli.belief`` ← ``pecli.models`` ← ``pecli.policies`` ← ``wrappers`` ← ``pecli.rl`` ← ...
+    never back."""
     assert _cycles(_graph(lambda name: ".".join(name.split(".")[:2]))) == []
 
 
@@ -104,6 +107,7 @@ def test_the_lower_layers_import_nothing_above_them():
     graph = _graph(lambda name: ".".join(name.split(".")[:2]))
     assert not graph["pecli.game"] & {"pecli.policies", "pecli.models", "pecli.rl", "pecli.match"}
     assert "pecli.rl" not in graph["pecli.policies"] and "pecli.rl" not in graph["pecli.models"]
+    assert "wrappers" not in graph["pecli.models"] | graph["pecli.policies"] | graph["pecli.game"]
 
 
 def test_records_load_no_network() -> None:

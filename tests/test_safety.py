@@ -630,3 +630,13 @@ def test_a_record_that_is_not_a_regular_file_is_not_read(tmp_path: Path) -> None
     (tmp_path / "zero.json").symlink_to("/dev/zero")  # would never end
     with pytest.raises(PecliError, match="not a regular file"):
         read_json(tmp_path / "zero.json", "record")
+
+
+def test_a_mixture_member_that_is_a_typo_is_an_unknown_name_and_code_needs_trust(quick) -> None:
+    from pecli.errors import PolicyError
+    from pecli.policies.registry import resolve_policy
+
+    with pytest.raises(PolicyError, match="'interceptr', which is neither a built-in"):
+        resolve_policy("mix:pure-pursuit,interceptr", "pursuer", quick)
+    with pytest.raises(PolicyError, match="imports no code"):
+        resolve_policy("mix:pure-pursuit,pecli.policies.heuristics:PurePursuit", "pursuer", quick)

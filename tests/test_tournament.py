@@ -374,3 +374,11 @@ def test_a_small_grid_keeps_the_paper_layout_with_names(quick: Scenario) -> None
 
     (table,) = results_tables(zoo_results(quick, 2, 2, run="s"), width=120)
     assert [column.header for column in table.columns][1:] == [f"s{i}/exploiter-pursuer/round-00{i}" for i in range(2)]
+
+
+def test_a_seed_without_sample_is_refused_not_ignored(tmp_path: Path) -> None:
+    out = str(tmp_path / "t")
+    result = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-s", "7", "--out", out])
+    assert result.exit_code == 1 and "--seed seeds the --sample draw only" in result.output, result.output
+    negative = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-s", "-1", "--sample", "2"])
+    assert negative.exit_code == 2  # below the option's minimum

@@ -159,11 +159,39 @@ def test_a_trial_with_repeats_trains_on_each_seed_and_scores_their_mean(
         assert trial.intermediate_values[4] == pytest.approx((scores[0] + scores[1]) / 2)  # the running mean
 
 
-@pytest.mark.parametrize("option", ["--repeats", "--cpu-minutes", "--evaluations", "--eval-episodes"])
-def test_zero_budgets_are_refused_not_taken_for_the_default(tmp_path: Path, option: str) -> None:
-    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", option, "0", "--dir", str(tmp_path)])
-    assert result.exit_code == 1 and f"{option} must be positive, not 0" in result.output, result.output
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--repeats", "0", "--repeats must be positive, not 0"),
+        ("--evaluations", "0", "--evaluations must be positive, not 0"),
+        ("--eval-episodes", "0", "--eval-episodes must be positive, not 0"),
+        ("--cpu-minutes", "0", "--cpu-minutes must be in (0, 100000], not 0"),
+        ("--cpu-minutes", "nan", "--cpu-minutes must be in (0, 100000], not nan"),
+    ],
+)
+def test_zero_budgets_are_refused_not_taken_for_the_default(
+    tmp_path: Path, option: str, value: str, message: str
+) -> None:
+    result = runner.invoke(app, ["tune", "pursuer", "-c", "quick", option, value, "--dir", str(tmp_path)])
+    assert result.exit_code == 1 and message in result.output, result.output
     assert not (tmp_path / "studies.db").exists()
+
+
+def test_a_trial_stopped_by_ctrl_c_leaves_no_traceback_but_a_failed_one_does() -> None:
+    import logging
+    import sys
+
+    from pecli.rl.tune import _not_an_interrupt
+
+    def record(error: BaseException) -> logging.LogRecord:
+        try:
+            raise error
+        except BaseException:
+            info = sys.exc_info()
+        return logging.LogRecord("optuna.study._optimize", logging.WARNING, "", 0, "Trial 3 failed", (), info)
+
+    assert not _not_an_interrupt(record(KeyboardInterrupt()))
+    assert _not_an_interrupt(record(RuntimeError("diverged")))
 
 
 def test_a_selfplay_runs_reports_take_one_step_per_round_so_the_next_run_never_reuses_them(quick: Scenario) -> None:
@@ -273,3 +301,12 @@ def test_a_trial_whose_process_is_gone_is_failed_and_queued_again_at_once(tmp_pa
     assert len(again) == 1 and again[0].state == optuna.trial.TrialState.WAITING
     assert again[0].params["algo"] == dead.params["algo"]
     assert tune.reclaim_dead_trials(study) == []  # once
+
+
+def test_tune_selfplay_offers_no_frozen_opponent_and_a_bad_count_is_named(tmp_path: Path) -> None:
+    assert "--opponent" not in runner.invoke(app, ["tune", "selfplay", "--help"]).output
+    assert "--opponent" in runner.invoke(app, ["tune", "pursuer", "--help"]).output
+    refused = runner.invoke(app, ["tune", "selfplay", "-c", "quick", "-o", "greedy", "--dir", str(tmp_path)])
+    assert refused.exit_code == 2 and "No such option" in refused.output
+    jobs = runner.invoke(app, ["tune", "pursuer", "-c", "quick", "--jobs", "0", "--dir", str(tmp_path)])
+    assert jobs.exit_code == 1 and "--jobs must be at least 1, not 0" in jobs.output, jobs.output

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import sys
+import zipfile
 from pathlib import Path
 from unittest import mock
 
@@ -98,6 +99,18 @@ def test_rm_asks_and_deletes(zoo: Path, tmp_path: Path) -> None:
     assert deleted.exit_code == 0 and not checkpoint.exists() and not checkpoint.with_suffix(".json").exists()
     assert invoke("zoo", "rm", str(copy / "e"), "--yes").exit_code == 0 and not (copy / "e").exists()
     assert invoke("zoo", "rm", str(tmp_path)).exit_code == 1  # not a run folder
+    project = tmp_path / "project"  # a folder of the user's that happens to hold a config.yaml
+    (project / "src").mkdir(parents=True)
+    (project / "config.yaml").write_text("lr: 0.1\n")
+    (project / "src" / "main.py").write_text("print(1)\n")
+    photos = tmp_path / "photos.zip"  # a zip of the user's, with a JSON of the same name
+    with zipfile.ZipFile(photos, "w") as archive:
+        archive.writestr("a.jpg", b"...")
+    photos.with_suffix(".json").write_text('{"album": 1}')
+    for target in (project, photos):
+        refused = invoke("zoo", "rm", str(target), "--yes")
+        assert refused.exit_code == 1 and "refusing to delete it" in refused.output, refused.output
+    assert (project / "src" / "main.py").is_file() and photos.is_file() and photos.with_suffix(".json").is_file()
 
 
 def test_play_takes_the_scenario_a_checkpoint_was_trained_on(zoo: Path) -> None:

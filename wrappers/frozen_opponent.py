@@ -28,28 +28,14 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from pecli.game import Game
 from pecli.game.memory import FrameStack, HistoryWindow
+from pecli.game.spaces import ACTION_SPACE, observation_space
 from pecli.policies.base import Policy
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, Training
-
-ACTION_SPACE = spaces.Box(-1.0, 1.0, (2,), np.float32)
-
-
-def observation_space(game: Game, role: Role, training: Training, history: bool = True) -> spaces.Dict:
-    """The learner's ``Dict`` observation space (see the module's docstring) for ``game``'s layout."""
-    dim = game.obs_dim[role]
-    boxes = {"obs": spaces.Box(-1.0, 1.0, (training.frame_stack * dim,), np.float32)}
-    if history:
-        samples = -(-training.history_length // training.history_stride)  # as HistoryWindow keeps
-        boxes["history"] = spaces.Box(-1.0, 1.0, (samples * dim,), np.float32)
-    boxes["state"] = spaces.Box(-1.0, 1.0, (game.state_dim + 1,), np.float32)
-    boxes["opp_action"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
-    return spaces.Dict(boxes)
 
 
 class FrozenOpponentCore:

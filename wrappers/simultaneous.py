@@ -21,9 +21,10 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from pecli.game import Game
 from pecli.game.memory import FrameStack, HistoryWindow
+from pecli.game.spaces import ACTION_SPACE, observation_space
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
-from wrappers.frozen_opponent import ACTION_SPACE, DelegatingVecEnv, observation_space
+from wrappers.frozen_opponent import DelegatingVecEnv
 
 
 class Side:

@@ -55,8 +55,9 @@ def _root(
         bool,
         typer.Option(
             "--trust",
-            help="Allow unpickling files that need it (checkpoints of an older pecli): only for "
-            "files from a source you trust, as unpickling runs any code in them. Same as PECLI_TRUST=1.",
+            help="Allow what a file could use to run code: unpickling files that need it (checkpoints of an "
+            "older pecli) and importing a module:Class that a record or a mixture names. Only for files from a "
+            "source you trust. Same as PECLI_TRUST=1.",
         ),
     ] = False,
 ) -> None:

@@ -160,9 +160,8 @@ def run(
     kept, unfinished runs continue from their last checkpoint.
 
     On a machine smaller than the grid, [bold]--until-cpu-hours 1[/] brings every run to one CPU-hour
-    before any goes further (for the self-play schedules of [bold]strength[/] and [bold]schedules[/],
-    [bold]benchmarks/bench_strength.py report --cpu-hours 1[/] compares them there); run again with a
-    larger value, or without it, to go on.
+    before any goes further, so that all can be compared at that budget ([bold]pecli experiment status[/]
+    shows where each run stands); run again with a larger value, or without it, to go on.
     """
     from pecli.experiment import ExperimentRunner, RayCluster, load_experiment
 

@@ -31,7 +31,10 @@ from pecli.render import MAX_PANELS
 EPISODES = 100  # played without --episodes (one with --render to a .gif)
 MAX_BEHAVIOUR = 10_000  # episodes recorded whole for --behaviour
 MAX_FRAMES = 10_000_000  # and their steps in all (a few hundred MB of states)
-POLICY_HELP = "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, or module:Class."
+POLICY_HELP = (
+    "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, module:Class, "
+    "mix:A,B,... (several players, each game one of them) or nash:FOLDER (a tournament's --nash mixture)."
+)
 
 
 @user_errors

@@ -58,7 +58,10 @@ def tournament(
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Reuse the pairings already played in --out.")] = False,
-    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the --sample draw.")] = 0,
+    seed: Annotated[
+        int | None,
+        typer.Option("--seed", "-s", min=0, help="Seed of the --sample draw (the games' seeds are --seeds: 0 .. K-1)."),
+    ] = None,
     nash: Annotated[
         bool,
         typer.Option(
@@ -91,6 +94,8 @@ def tournament(
     require_batch(episodes, "add --seeds instead")
     if nash and sample is not None:
         raise PecliError("--nash needs every pairing: leave out --sample")
+    if seed is not None and sample is None:
+        raise PecliError("--seed seeds the --sample draw only; every pairing plays seeds 0 .. K-1 (--seeds)")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
     paths = paths or []
@@ -111,7 +116,7 @@ def tournament(
             found = find_players(paths, scenario, baselines=baselines)
             for reason in found.skipped:
                 err_console.print(f"[yellow]skipped[/] {reason}", highlight=False)
-            pairings = schedule(found.players, sample=sample, seed=seed)
+            pairings = schedule(found.players, sample=sample, seed=seed or 0)
             one_torch_thread()
             counts = {role: len(players) for role, players in found.players.items()}
             err_console.print(

@@ -51,6 +51,7 @@ StorageOption = Annotated[
 
 
 def _tune(what: str, **options: Any) -> None:
+    from pecli.exploit import check_cpu_minutes
     from pecli.models.algorithms import torch_device
     from pecli.rl.search_space import load_space
     from pecli.rl.tune import (
@@ -68,11 +69,10 @@ def _tune(what: str, **options: Any) -> None:
 
     o = options
     torch_device(o["device"])  # a machine without CUDA refuses --device cuda before any trial
-    if o["jobs"] < 1 or (o["trials"] is not None and o["trials"] < 1):
-        raise PecliError("--jobs and --trials must be at least 1")
+    for option in ("jobs", "trials"):
+        if o[option] is not None and o[option] < 1:
+            raise PecliError(f"--{option} must be at least 1, not {o[option]}")
     storage = o["storage"] or sqlite_url(o["dir"] / DB_NAME)
-    if what == "selfplay" and (o["opponent"] or o["eval_opponents"]):
-        raise PecliError("self-play has no frozen opponent: each side is scored against the other's baselines")
     if o["resume"]:
         if o["study"] is None:
             raise PecliError("--resume needs the --study to continue")
@@ -128,7 +128,8 @@ def _tune(what: str, **options: Any) -> None:
             space_text=text,
             **{"cpu_minutes": 3.0, **given},
         )
-        for option in ("cpu_minutes", "evaluations", "eval_episodes", "repeats"):
+        check_cpu_minutes(settings.cpu_minutes)
+        for option in ("evaluations", "eval_episodes", "repeats"):
             if getattr(settings, option) <= 0:
                 raise PecliError(f"--{option.replace('_', '-')} must be positive, not {getattr(settings, option):g}")
         if not 0 <= settings.seed < 2**32:
@@ -295,6 +296,14 @@ def _command(what: str, doc: str) -> Any:
         )
 
     command.__doc__ = doc
+    if what == "selfplay":  # no frozen opponent: the command takes neither option (nor shows it in --help)
+        import inspect
+
+        signature = inspect.signature(command, eval_str=True)
+        dropped = ("opponent", "eval_opponents")
+        command.__signature__ = signature.replace(  # type: ignore[attr-defined]
+            parameters=[p for p in signature.parameters.values() if p.name not in dropped]
+        )
     return command
 
 

@@ -116,21 +116,38 @@ def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:
     return None
 
 
+RUN_MARKS = ("command.txt", "run.json", "selfplay.json")  # what pecli writes into every run folder it makes
+
+
 @app.command("rm")
 @user_errors
 def remove(
     target: Annotated[Path, typer.Argument(help="A run folder or a checkpoint file.")],
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask for confirmation.")] = False,
 ) -> None:
-    """Delete a run (its folder) or one checkpoint (the zip and its metadata)."""
-    from pecli.locks import locked
-    from pecli.zoo import metadata_path
+    """Delete a run (its folder) or one checkpoint (the zip and its metadata).
 
+    Only what pecli wrote: a folder with a run's config.yaml and command.txt (or run.json), a zip with a
+    checkpoint's metadata beside it or a checkpoint's entries inside.
+    """
+    from pecli.locks import locked
+    from pecli.zoo import ZooError, checkpoint_problem, metadata_path, read_metadata
+
+    metadata = False  # whether the .json beside a checkpoint is its pecli metadata (deleted with it)
     if target.is_dir():
-        if not (target / "config.yaml").is_file():
-            raise PecliError(f"{target} is not a run folder (no config.yaml): refusing to delete it")
+        if not (target / "config.yaml").is_file() or not any((target / f).is_file() for f in RUN_MARKS):
+            raise PecliError(
+                f"{target} is not a pecli run folder (a config.yaml and a {' or '.join(RUN_MARKS)}): "
+                "refusing to delete it"
+            )
         what = f"run {target} and everything in it"
     elif target.is_file() and target.suffix == ".zip":
+        try:
+            read_metadata(target)
+            metadata = True
+        except ZooError:
+            if checkpoint_problem(target):
+                raise PecliError(f"{target} is not a pecli checkpoint: refusing to delete it") from None
         what = f"checkpoint {target}"
     else:
         raise PecliError(f"nothing to delete at {target} (give a run folder or a checkpoint .zip)")
@@ -141,7 +158,8 @@ def remove(
             shutil.rmtree(target)
     else:
         target.unlink()
-        metadata_path(target).unlink(missing_ok=True)
+        if metadata:
+            metadata_path(target).unlink(missing_ok=True)
     err_console.print(f"deleted {what}", highlight=False)
 
 
@@ -248,8 +266,8 @@ def fork(
         typer.Option("--add", help="A scripted player that joins the copy's pools (repeat for several)."),
     ] = None,
 ) -> None:
-    """Copy a stopped self-play run whole into another zoo, to train on as one arm of an A/B (the original trained
-    on is the control). [bold]--add[/] puts scripted players into its pools, as the ones a run starts with."""
+    """Copy a stopped self-play run whole into another zoo, to train on as one arm of an A/B (the original, trained
+    on alike, is the control). [bold]--add[/] puts scripted players into its pools, as the ones a run starts with."""
     from pecli.rl.fork import fork_run, run_cpu_hours
 
     target = fork_run(run, to, add or [])

@@ -74,11 +74,11 @@ class Grid:
     @property
     def half_sizes(self) -> tuple[int, int]:
         """Nodes of the x half and of the y half: the value array is ``(X, Y)`` when flattened by halves."""
-        return int(np.prod([a.n for a in self.x_axes])), int(np.prod([a.n for a in self.y_axes]))
+        return math.prod(a.n for a in self.x_axes), math.prod(a.n for a in self.y_axes)
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.shape))
+        return math.prod(self.shape)  # Python's integers: a huge grid's count does not wrap around
 
     def describe(self) -> str:
         """``23x81x23x81`` style."""

@@ -105,6 +105,8 @@ class Solution:
             raise SolutionError(f"no HJ solution at {path}")
         if path.stat().st_size == 0:
             raise SolutionError(f"{path}: an empty file, not an HJ solution (an interrupted copy?); solve again")
+        if not zipfile.is_zipfile(path):  # else NumPy reads it as a pickle and says to trust it
+            raise SolutionError(f"{path}: not an HJ solution (not a .npz archive, or a truncated one)")
         try:
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))

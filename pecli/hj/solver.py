@@ -217,7 +217,7 @@ def solve_with_capture_steps(
     ``k`` with ``V_k(x) ≤ 0`` (``V_k`` only falls with ``k``), or ``problem.steps + 1`` where it cannot
     within the horizon; unsigned integers of the grid's shape.
     """
-    nodes = int(np.prod(problem.grid.shape))
+    nodes = problem.grid.size
     if nodes > MAX_NODES:
         raise ConfigError(
             f"the grid {problem.grid.describe()} has {nodes:,} nodes; the solver keeps several "

@@ -27,12 +27,12 @@ from stable_baselines3.common.policies import BasePolicy
 
 from pecli.belief.model import features_dim
 from pecli.game import Game
+from pecli.game.spaces import ACTION_SPACE, observation_space
 from pecli.models.algorithms import get_algorithm
 from pecli.models.extractors import BeliefExtractor, belief_observation_space
 from pecli.scenario import MAX_BATCH, MAX_DEPTH, MAX_WIDTH, Scenario
 from pecli.trust import trusted, untrusted
 from pecli.zoo import CheckpointMeta, ZooError
-from wrappers.frozen_opponent import ACTION_SPACE, observation_space
 
 MAX_WEIGHTS_BYTES = 4 << 30  # one state dict of a checkpoint, unpacked: far above any network pecli trains
 MAX_CRITICS = 64

@@ -103,6 +103,10 @@ def _mixture_member(spec: str, folder: Path) -> str:
         if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
             raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
         return str(member)
+    if ":" not in spec:  # a misspelt name, not code
+        raise PolicyError(
+            f"the mixture names '{spec}', which is neither a built-in ({', '.join(builtin_names())}) nor a policy file"
+        )
     if not trusted():
         raise PolicyError(
             f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "

@@ -25,6 +25,7 @@ see :func:`pecli.rl.train.resume_seed`), so the partial episodes of the interval
 from __future__ import annotations
 
 import math
+import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -163,6 +164,8 @@ def _read_chunks(directory: Path, ring: Ring, arrays: dict[str, np.ndarray]) -> 
     """Fill ``arrays`` (the buffer's own) from the files of ``ring``, oldest first."""
     for chunk in ring.chunks:
         rows = np.arange(chunk.start, chunk.end) % ring.capacity
+        if not zipfile.is_zipfile(directory / chunk.file):
+            raise ValueError(f"{chunk.file}: not a .npz archive (damaged or truncated)")
         with np.load(directory / chunk.file, allow_pickle=False) as data:
             if set(data.files) != set(arrays):
                 raise ValueError(f"{chunk.file} holds {sorted(data.files)}, the buffer {sorted(arrays)}")

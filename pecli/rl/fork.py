@@ -1,5 +1,5 @@
 """Fork a stopped self-play run: a whole copy in another zoo, to train on as one arm of an A/B whose control is the
-original trained on (``pecli zoo fork``). Scripted players given with ``add`` join its pools as the ones a run
+original, trained on alike (``pecli zoo fork``). Scripted players given with ``add`` join its pools as the ones a run
 starts with (generation 0), so a run started before pecli had them can be tried with them; other settings go into
 the copy's ``config.yaml`` by hand (a resumed run refuses settings that changed)."""
 

@@ -19,6 +19,7 @@ heartbeat and run again with the same settings.
 
 from __future__ import annotations
 
+import logging
 import math
 import multiprocessing
 import os
@@ -50,6 +51,14 @@ from pecli.scenario import Scenario, scenario_from_dict
 # heartbeats, the stale-trial retry and multivariate TPE are flagged experimental by Optuna
 warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
 optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+def _not_an_interrupt(record: logging.LogRecord) -> bool:
+    """Drop Optuna's traceback of a trial stopped by Ctrl-C (the command says it was interrupted)."""
+    return not (record.exc_info and isinstance(record.exc_info[1], KeyboardInterrupt))
+
+
+logging.getLogger("optuna.study._optimize").addFilter(_not_an_interrupt)
 
 EVAL_SEED = 7_000_003  # evaluation games: no training run starts its games from this seed
 WORKER_ATTR = "worker"  # a trial's user attribute: the host and PID of the process that runs it

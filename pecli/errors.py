@@ -6,7 +6,12 @@ class PecliError(Exception):
 
 
 class ConfigError(PecliError):
-    """A scenario file that cannot be read or does not validate."""
+    """A scenario file that cannot be read or does not validate; ``problems`` lists every problem found (the
+    message names the first)."""
+
+    def __init__(self, message: str, problems: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.problems = problems or [message]
 
 
 class PolicyError(PecliError):

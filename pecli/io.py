@@ -104,5 +104,5 @@ def read_output_record(path: Path, model: type[RecordT], what: str) -> RecordT |
         return model.model_validate(read_json(path, what))
     except ValidationError as exc:
         first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
+        where = ".".join(str(part) for part in first["loc"]) or "top level"
         raise PecliError(f"{path}: not {article(what)} ({where}: {first['msg']}); use another --out") from None

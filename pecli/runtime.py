@@ -68,8 +68,14 @@ def read_sidecar(model: str | Path) -> dict[str, Any]:
     except RecursionError:
         raise ExportError(f"{path}: damaged sidecar (nested too deep)") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
-        found = data.get("format") if isinstance(data, dict) else None
-        raise ExportError(f"{path}: not a pecli sidecar of format {FORMAT} (found {found!r})")
+        found = (
+            "not a JSON object"
+            if not isinstance(data, dict)
+            else "no 'format'"
+            if "format" not in data
+            else f"format {data['format']!r}"
+        )
+        raise ExportError(f"{path}: not a pecli sidecar of format {FORMAT} ({found})")
     return data
 
 
@@ -105,8 +111,10 @@ class ExportedModel:
                 float(sidecar["sensor"]["fov_rad"]),
             )
             self.limits = np.asarray(sidecar["command_limits"], dtype=np.float64)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ExportError(f"incomplete sidecar: {type(exc).__name__}: {exc}") from None
+        except KeyError as exc:
+            raise ExportError(f"incomplete sidecar (no '{exc.args[0]}')") from None
+        except (TypeError, ValueError) as exc:
+            raise ExportError(f"incomplete sidecar ({type(exc).__name__}: {exc})") from None
         bounded = {
             "dt_s": (self.dt, 10.0),
             "frame_skip": (self.frame_skip, 1000),
@@ -172,7 +180,10 @@ class ExportedModel:
             session = ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own exception types for damaged graphs
             raise ExportError(f"{source}: cannot load the ONNX graph ({type(exc).__name__}: {exc})") from None
-        return cls(session, sidecar)
+        try:
+            return cls(session, sidecar)
+        except ExportError as exc:
+            raise ExportError(f"{source}: {exc}") from None
 
     def run(
         self,

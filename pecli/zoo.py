@@ -119,6 +119,13 @@ class CheckpointMeta:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> CheckpointMeta:
+        """The metadata in ``data`` (unknown keys ignored); ``ValueError`` naming the fields it lacks."""
+        from dataclasses import MISSING, fields
+
+        required = [f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING]
+        missing = [name for name in required if name not in data]
+        if missing:
+            raise ValueError(f"no {', '.join(missing)}")
         known = {f for f in cls.__dataclass_fields__}
         return cls(**{k: v for k, v in data.items() if k in known})
 

@@ -144,6 +144,20 @@ def test_config_commands() -> None:
     assert checked.exit_code == 0 and checked.stdout.count("ok") == 2
 
 
+def test_config_check_lists_every_problem_and_play_names_the_first(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: k\npursuer: {kind: tank}\n")
+    checked = invoke("config", "check", str(bad))
+    lines = checked.output.strip().splitlines()
+    assert checked.exit_code == 1 and len(lines) == 3, checked.output
+    assert any("pursuer: kind must be one of 'car', 'point_mass', not 'tank'" in line for line in lines)
+    played = invoke("play", "-c", str(bad))
+    assert played.exit_code == 1 and "(and 2 more problems)" in played.output
+    (tmp_path / "empty.yaml").write_text("")
+    empty = invoke("config", "check", str(tmp_path / "empty.yaml"))
+    assert empty.exit_code == 1 and "not an empty file" in empty.output
+
+
 def test_output_with_no_terminal_keeps_whole_table_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Under nohup or cron Rich would cut tables to 80 columns (run names elided): 200 there, the terminal's
     width where one is attached, and ``COLUMNS`` wins over both."""

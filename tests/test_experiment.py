@@ -963,3 +963,20 @@ def test_embedded_ray_starts_without_its_token_notice(monkeypatch: pytest.Monkey
         logging.getLogger(ray_executor.TOKEN_LOGGER).removeHandler(handler)
     assert shown == 2 * ["Token authentication is disabled for this"]
     assert all(options["log_to_driver"] is False and options["include_dashboard"] is False for options in started)
+
+
+def test_a_cluster_address_where_nothing_answers_is_refused_at_once() -> None:
+    import socket
+
+    from pecli.experiment.ray_executor import _check_reachable
+
+    with socket.socket() as listening:
+        listening.bind(("127.0.0.1", 0))
+        listening.listen()
+        _check_reachable(f"127.0.0.1:{listening.getsockname()[1]}")  # a head that answers
+        _check_reachable("auto")  # left to Ray
+    with socket.socket() as closed:
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    with pytest.raises(PecliError, match=f"cannot join the Ray cluster at ray://127.0.0.1:{port}: nothing answers"):
+        _check_reachable(f"ray://127.0.0.1:{port}")

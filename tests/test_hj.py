@@ -600,6 +600,7 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
         (["hj", "solve", "-o", "out.txt"], "--out must end in .npz"),
         (["hj", "show", "nothing.npz"], "no HJ solution at"),
         (["hj", "table", "nothing.json"], "nothing.json"),
+        (["hj", "list", "no-such-folder"], "no folder no-such-folder"),
         (["play", "-p", "hj", "-c", "point_mass"], "pecli hj solve"),
         (["hj", "solve", "-g", "11,5", "--backend", "hj-reachability"], 'pip install "pecli[hj]"'),
     ):

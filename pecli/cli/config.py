@@ -6,9 +6,11 @@ from typing import Annotated
 
 import typer
 import yaml
+from rich.markup import escape
 from rich.table import Table
 
-from pecli.cli.common import TABLE_WIDTH, console, user_errors
+from pecli.cli.common import TABLE_WIDTH, console, err_console, user_errors
+from pecli.errors import ConfigError
 from pecli.scenario import builtin_config_dir, builtin_names, load_scenario
 
 app = typer.Typer(help="List, show and check scenario files.", no_args_is_help=True)
@@ -47,7 +49,12 @@ def show(config: Annotated[str, typer.Argument(help="A YAML file or a built-in n
 @app.command("check")
 @user_errors
 def check(configs: Annotated[list[str], typer.Argument(help="YAML files or built-in names.")]) -> None:
-    """Validate scenario files; exit 1 at the first one that is wrong."""
+    """Validate scenario files; at the first one that is wrong, list each of its problems and exit 1."""
     for config in configs:
-        scenario = load_scenario(config)
+        try:
+            scenario = load_scenario(config)
+        except ConfigError as exc:
+            for problem in exc.problems:
+                err_console.print(f"[bold red]error:[/] {escape(problem)}", highlight=False, soft_wrap=True)
+            raise typer.Exit(code=1) from None
         console.print(f"[green]ok[/] {config}: {scenario.name} ({scenario.fingerprint()})", highlight=False)

@@ -164,6 +164,8 @@ def list_cache(
     from pecli.hj.cache import cache_dir
     from pecli.hj.solution import Solution, SolutionError
 
+    if folder is not None and not folder.is_dir():
+        raise PecliError(f"no folder {folder}")
     folder = cache_dir() if folder is None else folder
     files = sorted(folder.glob("*.npz")) if folder.is_dir() else []
     if not files:

@@ -90,6 +90,23 @@ def _restore_sigterm(handler: Any) -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
+PROBE_TIMEOUT_S = 10.0  # how long a cluster's head may take to accept a connection
+
+
+def _check_reachable(address: str) -> None:
+    """:class:`PecliError` in one line when nothing answers at a ``host:port`` (or ``ray://host:port``) address,
+    instead of Ray retrying for minutes; ``auto`` and addresses without a port are left to Ray."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S):
+            pass
+    except (OSError, ValueError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__
+        raise PecliError(f"cannot join the Ray cluster at {address}: nothing answers there ({reason})") from None
+
+
 class RayCluster:
     """A connection to Ray for one experiment: embedded with ``cpus`` (default: all cores) or joined at
     ``address``; a context manager that stops an embedded Ray (and disconnects from a joined one)."""
@@ -106,6 +123,8 @@ class RayCluster:
     def __enter__(self) -> RayCluster:
         if ray.is_initialized():  # e.g. a test connected to its own cluster already
             return self
+        if self.address is not None:
+            _check_reachable(self.address)
         options: dict[str, Any] = {"log_to_driver": False}  # the runs' output stays in Ray's logs
         if not (self.address or "").startswith("ray://"):  # Ray Client passes these on to the remote driver
             options.update(include_dashboard=False, configure_logging=False)

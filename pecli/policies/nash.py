@@ -91,7 +91,7 @@ def read_nash(path: Path) -> NashRecord:
         raise PolicyError(str(exc)) from None
     except ValidationError as exc:
         first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
+        where = ".".join(str(part) for part in first["loc"]) or "top level"
         raise PolicyError(f"{path}: not a Nash mixture ({where}: {first['msg']})") from None
 
 

@@ -86,6 +86,10 @@ def _describe(error: dict[str, Any]) -> str:
         return f"true or false is expected here (got {shown!r})"
     if kind == "finite_number":
         return f"must be a finite number (got {shown!r})"
+    if kind == "union_tag_invalid" and "ctx" in error:
+        ctx = error["ctx"]
+        key = str(ctx["discriminator"]).strip("'")
+        return f"{key} must be one of {ctx['expected_tags']}, not '{ctx['tag']}'"
     msg = msg.removeprefix("Value error, ")
     if "input" in error and kind not in ("model_type", "union_tag_invalid"):
         if not isinstance(shown, dict | list):
@@ -102,13 +106,19 @@ def _location(error: dict[str, Any]) -> str:
 def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:
     """Validate ``data`` into a :class:`Scenario`; errors become one-line :class:`ConfigError`."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a scenario must be a mapping of keys to values, not {type(data).__name__}")
+        found = "an empty file" if data is None else f"a {type(data).__name__}"
+        raise ConfigError(f"{source}: a scenario must be a mapping of keys to values, not {found}")
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(validation_message(exc, source)) from None
+        raise ConfigError(validation_message(exc, source), validation_problems(exc, source)) from None
     check_resources(scenario, source)
     return scenario
+
+
+def validation_problems(exc: ValidationError, source: str) -> list[str]:
+    """Every problem of a pydantic error, one line each: ``<source>: <key.path>: <problem>``."""
+    return [f"{source}: {_location(dict(e)) or 'top level'}: {_describe(dict(e))}" for e in exc.errors()]
 
 
 def validation_message(exc: ValidationError, source: str) -> str:

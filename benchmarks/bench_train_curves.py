@@ -3,11 +3,11 @@
     python benchmarks/bench_train_curves.py curves --minutes 10    # capture rate vs greedy over CPU time, 3 seeds
     python benchmarks/bench_train_curves.py report                 # table + plot from finished curve runs
 
-``curves`` runs ``pecli train pursuer`` for each seed with a budget of ``--max-steps``
+``curves`` runs ``pecli train pursuer --cpu-minutes M`` for each seed with a budget of ``--max-steps``
 transitions (the curriculum of paper.yaml spans its first 30 %) and an evaluation against the
 greedy evader (200 batched episodes) every ``--eval-every`` transitions, until each run has used
-``--minutes`` of CPU time or its budget; ``--jobs 2`` runs two seeds at a time on a 2-core machine.
-``--resume`` continues stopped runs until they have used ``--minutes`` in all. Each run
+``--minutes`` of CPU time or its transitions; ``--jobs 2`` runs two seeds at a time on a 2-core machine.
+``--resume`` continues the runs until they have used ``--minutes`` in all. Each run
 writes ``eval_pursuer.csv`` (steps, CPU seconds, capture rate) in its zoo folder. ``report``
 takes each seed's best evaluation within each budget of ``--at`` (default 10 and 30 CPU-minutes),
 prints their medians, and draws ``docs/learning_curves_<belief>.png`` (``learning_curves_<config>_<belief>.png``
@@ -36,7 +36,7 @@ CURVES = ROOT / "runs" / "bench_train"
 
 
 def curves(args: argparse.Namespace) -> None:
-    """Start the curve runs, ``--jobs`` at a time, each stopped after ``--minutes`` of CPU time."""
+    """Start the curve runs, ``--jobs`` at a time, each with ``pecli train --cpu-minutes``."""
     pending = list(args.seeds)
     running: list[tuple[int, subprocess.Popen]] = []
     CURVES.mkdir(parents=True, exist_ok=True)
@@ -45,7 +45,8 @@ def curves(args: argparse.Namespace) -> None:
             seed = pending.pop(0)
             name = f"{args.label or args.config}-{args.belief}-s{seed}"
             command = [sys.executable, "-m", "pecli", "train", "pursuer", "--zoo", str(CURVES), "--name", name, "-q"]
-            if args.resume:  # the run's own settings and budget; its CPU time continues from its checkpoint
+            command += ["--cpu-minutes", str(args.minutes)]
+            if args.resume:  # the run's own settings; its CPU time continues from its checkpoint
                 command += ["--resume"]
             else:
                 command += [
@@ -65,13 +66,8 @@ def curves(args: argparse.Namespace) -> None:
             running.append((seed, subprocess.Popen(command, cwd=ROOT)))
         time.sleep(5)
         for seed, process in list(running):
-            csv_path = CURVES / f"{args.label or args.config}-{args.belief}-s{seed}" / "eval_pursuer.csv"
-            used = _last_cpu_seconds(csv_path)
-            if process.poll() is not None or used >= 60 * args.minutes:
-                if process.poll() is None:
-                    process.terminate()  # the run has had its CPU budget; SIGTERM saves last.zip
-                    process.wait()
-                print(f"seed {seed}: stopped at {used / 60:.1f} CPU-minutes", flush=True)
+            if process.poll() is not None:
+                print(f"seed {seed}: done (exit code {process.returncode})", flush=True)
                 running.remove((seed, process))
 
 
@@ -81,11 +77,17 @@ def _read(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array([m for m, _ in rows]), np.array([r for _, r in rows])
 
 
-def _last_cpu_seconds(csv_path: Path) -> float:
-    if not csv_path.is_file():
-        return 0.0
-    cpu, _ = _read(csv_path)
-    return float(cpu[-1] * 60) if cpu.size else 0.0
+def _trained_all_steps(run: Path) -> bool:
+    """Whether the run reached its ``--max-steps`` (rather than its CPU budget): it spent less CPU than asked."""
+    import json
+
+    import yaml
+
+    final = run / "pursuer" / "final.json"
+    if not final.is_file():
+        return False
+    steps = yaml.safe_load((run / "config.yaml").read_text())["training"]["steps"]
+    return json.loads(final.read_text())["steps"] >= steps
 
 
 def report(args: argparse.Namespace) -> None:
@@ -105,7 +107,7 @@ def report(args: argparse.Namespace) -> None:
         for i, path in enumerate(runs):
             cpu, rate = _read(path)
             ax.plot(cpu, rate, marker=".", color=colour, alpha=max(0.3, 1.0 - 0.25 * i), label=path.parent.name)
-            finished = (path.parent / "pursuer" / "final.zip").is_file()  # spent its whole budget sooner
+            finished = _trained_all_steps(path.parent)  # done with its transitions before its CPU budget
             for minutes in at:
                 if cpu.size and (cpu <= minutes).any() and (cpu[-1] >= minutes or finished):
                     at[minutes].append(float(np.max(rate[cpu <= minutes])))  # best evaluation so far
@@ -150,7 +152,7 @@ def main() -> None:
     c.add_argument(
         "--resume",
         action="store_true",
-        help="continue stopped runs (pecli train --resume) until --minutes of their CPU time in all",
+        help="continue the runs (pecli train --resume) until --minutes of their CPU time in all",
     )
     r = sub.add_parser("report")
     r.add_argument("--config", default="paper")

@@ -38,6 +38,7 @@ class JobRecord(_Record):
     role: Role | None = None
     opponent: str | None = Field(default=None, max_length=MAX_TEXT)
     seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+    cpu_minutes: float | None = Field(default=None, gt=0.0, le=MAX_CPU_SECONDS / 60)  # pecli train --cpu-minutes
 
 
 class Turn(_Record):

@@ -388,3 +388,22 @@ def test_make_learner_gives_the_view_its_belief_and_a_fitter_to_a_learned_one(ki
     assert env.belief is model.policy.actor.features_extractor.belief
     assert isinstance(fit, FitBelief) if fits else fit is None
     assert env.reset()["belief"].shape[0] == 2  # the features go into every observation
+
+
+def test_a_cpu_budget_stops_the_run_and_resumes_keep_or_replace_it(tmp_path: Path, monkeypatch) -> None:
+    ticks = iter(range(1_000_000))  # each reading of the process's CPU time is half a second later
+    monkeypatch.setattr("pecli.rl.train.process_cpu_seconds", lambda: 0.5 * next(ticks))
+    result = train(tmp_path, "--steps", "100000", "--cpu-minutes", "0.1")
+    assert result.exit_code == 0 and "or 0.1 CPU-minutes" in result.output, result.output
+    meta = json.loads((tmp_path / "run" / "pursuer" / "final.json").read_text())
+    assert 0 < meta["steps"] < 1000 and meta["cpu_seconds"] >= 6.0  # stopped by the budget, long before its steps
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["cpu_minutes"] == 0.1
+    resume = ["train", "pursuer", "--zoo", str(tmp_path), "--name", "run", "--resume", "-q"]
+    assert invoke(resume).exit_code == 0  # the run's own budget, already spent: it stops at once
+    again = json.loads((tmp_path / "run" / "pursuer" / "final.json").read_text())
+    assert again["steps"] - meta["steps"] <= 4  # one vector step of its 4 games at most
+    assert invoke([*resume, "--cpu-minutes", "0.2"]).exit_code == 0
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["cpu_minutes"] == 0.2
+    assert json.loads((tmp_path / "run" / "pursuer" / "final.json").read_text())["steps"] > again["steps"]
+    refused = invoke([*resume, "--cpu-minutes", "nan"])
+    assert refused.exit_code == 1 and "--cpu-minutes must be in" in refused.output

@@ -56,6 +56,14 @@ def train(
         typer.Option("--belief", help="What the actor knows of the unseen opponent (default: the config's, none)."),
     ] = None,
     steps: Annotated[int | None, typer.Option("--steps", help="Override the budget (learner transitions).")] = None,
+    cpu_minutes: Annotated[
+        float | None,
+        typer.Option(
+            "--cpu-minutes",
+            help="Also stop when the run's CPU time (across resumes) reaches this many minutes, before --steps "
+            "if need be. The run keeps it: --resume continues to it, or to a new one given here.",
+        ),
+    ] = None,
     seed: Annotated[
         int | None,
         typer.Option("--seed", "-s", min=0, max=2**32 - 1, help="Seed of games, noise and networks (default 0)."),
@@ -82,6 +90,7 @@ def train(
     continues it from its newest checkpoint, replay buffer included.
     TensorBoard logs are in zoo/<run>/tb.
     """
+    from pecli.exploit import check_cpu_minutes
     from pecli.models.algorithms import torch_device
     from pecli.rl.resume import resume_train
     from pecli.rl.train import (
@@ -97,6 +106,8 @@ def train(
 
     role_name = role.value
     torch_device(device)  # a machine without CUDA refuses --device cuda in one line
+    if cpu_minutes is not None:
+        check_cpu_minutes(cpu_minutes)
     settings = parse_overrides(overrides or [])
     if steps is not None:
         settings["steps"] = steps
@@ -108,6 +119,7 @@ def train(
     if resume:
         kept = resume_train(zoo, name, role_name, config, opponent, seed, settings)
         scenario, opponent, seed, curriculum_steps = kept.scenario, kept.opponent, kept.seed, kept.curriculum_steps
+        cpu_minutes = kept.cpu_minutes if cpu_minutes is None else cpu_minutes
     else:
         scenario = load_scenario(config or "paper")
     if settings:
@@ -125,13 +137,15 @@ def train(
         log_every=None if quiet or err_console.is_terminal else LOG_EVERY,
         curriculum_steps=curriculum_steps,
         device=device,
+        cpu_budget=None if cpu_minutes is None else 60.0 * cpu_minutes,
     )
 
     def started(run: Run) -> None:
         err_console.print(
             f"run [bold]{escape(str(run.path))}[/]: {role_name} vs {escape(job.opponent)} on "
             f"{escape(scenario.name)}, "
-            f"{scenario.training.steps:,} steps",
+            f"{scenario.training.steps:,} steps"
+            + ("" if cpu_minutes is None else f" or {cpu_minutes:g} CPU-minutes, whichever comes first"),
             highlight=False,
         )
 

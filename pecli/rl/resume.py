@@ -59,6 +59,7 @@ class ResumedTrain:
     opponent: str
     seed: int
     curriculum_steps: int
+    cpu_minutes: float | None = None  # the run's CPU budget, if it has one
 
 
 def resume_train(
@@ -90,7 +91,8 @@ def resume_train(
     _refuse_changes(scenario, settings, "steps")
     if opponent is None:  # the record's, checked: a run folder from elsewhere names no code or path to follow
         opponent = recorded_policy(kept["opponent"], zoo, f"{run.path / JOB_FILE}")
-    return ResumedTrain(scenario, opponent, kept["seed"], scenario.training.steps)
+    budget = kept.get("cpu_minutes")
+    return ResumedTrain(scenario, opponent, kept["seed"], scenario.training.steps, budget)
 
 
 def resume_selfplay(

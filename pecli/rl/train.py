@@ -132,6 +132,14 @@ class TrainJob:
     warm_start: Path | None = None  # a checkpoint of this role and network whose weights a new run starts from
 
 
+def _job_record(job: TrainJob) -> dict[str, Any]:
+    """What ``run.json`` keeps of a ``pecli train`` run for its resumes."""
+    record: dict[str, Any] = {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed}
+    if job.cpu_budget is not None:
+        record["cpu_minutes"] = job.cpu_budget / 60.0
+    return record
+
+
 def checkpoint_meta(job: TrainJob, model: Any, episodes: int, cpu_seconds: float | None = None) -> CheckpointMeta:
     """The metadata written beside a checkpoint of ``model`` after ``episodes`` episodes and ``cpu_seconds``."""
     t = job.scenario.training
@@ -307,11 +315,13 @@ def train(
             job.zoo,
             job.name,
             job.scenario,
-            {"command": "train", "role": job.role, "opponent": job.opponent, "seed": job.seed},
+            _job_record(job),
         )
         durable = DurableState(run.role_dir(job.role) / RESUME_DIR)
     else:
         run.log_command()
+        if job.cpu_budget is not None:  # a budget given on resume becomes the run's
+            run.write_job({**(run.job() or {}), **_job_record(job)})
     episodes, cpu_before = 0, 0.0
     if record is None and job.warm_start is not None:
         restore_model(model, job.warm_start)

@@ -17,8 +17,8 @@ step, so a league's cost per round grows with its pool; ``--rounds 6`` shows it.
 (b) collects history windows of a pure-pursuit pursuer against the random-walk, greedy and rash
 evaders (``--games`` per evader), fits the BiMDN and the image belief on them by NLL (paper
 settings: batch 256, Adam 0.002), keeping the state with the best NLL on validation games, then
-measures, on held-out games with other seeds, the mean distance (m) between each belief's mean
-and the evader's true position at the moments the pursuer does not see it: BiMDN, UKF, image,
+measures (:mod:`pecli.rl.belief_quality`), on held-out games with other seeds, the mean distance (m) between each
+belief's mean and the evader's true position at the moments the pursuer does not see it: BiMDN, UKF, image,
 "last seen" (the last sighting in the window; the arena's centre if none) and the centre itself,
 over all unseen moments and split by whether the window holds a sighting.
 
@@ -109,90 +109,15 @@ def league(args: argparse.Namespace) -> None:
         print(f"| {kind} | {' | '.join(cells)} |")
 
 
-def _windows(scenario, evaders: list[str], games: int, seed: int):
-    """Windows of a pure-pursuit pursuer vs each evader: (history, true position, unseen) at every 10th step."""
-    from pecli.game import Game
-    from pecli.game.memory import HistoryWindow
-    from pecli.policies import resolve_policy
-
-    histories, targets, unseen = [], [], []
-    for k, name in enumerate(evaders):
-        game = Game(scenario, n=games, seed=seed + k)
-        obs = game.reset(seed=seed + k)
-        pursuer = resolve_policy("pure-pursuit", "pursuer", scenario, seed=seed + k)
-        evader = resolve_policy(name, "evader", scenario, seed=seed + 100 + k)
-        pursuer.reset(games)
-        evader.reset(games)
-        t = scenario.training
-        window = HistoryWindow(games, game.obs_dim["pursuer"], t.history_length, t.history_stride)
-        window.reset(obs["pursuer"])
-        seen_index = game.codecs["pursuer"].seen_index
-        for step in range(1, scenario.horizon + 1):
-            obs = game.step(pursuer.act(obs["pursuer"]), evader.act(obs["evader"])).obs
-            window.push(obs["pursuer"])
-            if step % 10 == 0:
-                live = ~game.finished
-                histories.append(window.get()[live])
-                targets.append(game.normalised_state()[live, 5:7])
-                unseen.append(obs["pursuer"][live, seen_index] < 0)
-    return np.concatenate(histories), np.concatenate(targets), np.concatenate(unseen)
-
-
-def _last_seen(decoder, history: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The last sighting in each window (the arena's centre if none), and whether there was one."""
-    window = decoder(history)
-    out = np.zeros((history.shape[0], 2))
-    for t in range(window.seen.shape[1]):  # later sightings overwrite earlier ones
-        seen = window.seen[:, t] & window.valid[:, t]
-        out[seen] = window.opp_pos[seen, t]
-    return out, (window.seen & window.valid).any(axis=1)
-
-
-def _mean(model, history: np.ndarray) -> np.ndarray:
-    with th.no_grad():
-        return np.concatenate(
-            [model.mixture(th.as_tensor(history[i : i + 2048])).mean().numpy() for i in range(0, len(history), 2048)]
-        )
-
-
-def _nll(model, history: np.ndarray, target: np.ndarray) -> float:
-    with th.no_grad():
-        total = sum(
-            -model.mixture(th.as_tensor(history[i : i + 2048]))
-            .log_prob(th.as_tensor(target[i : i + 2048]))
-            .sum()
-            .item()
-            for i in range(0, len(history), 2048)
-        )
-    return total / len(history)
-
-
-def _fit(model, data, validation, settings, updates: int, check_every: int) -> tuple[int, float]:
-    """Fits ``model`` by NLL (the paper's batch and learning rate); keeps the state with the best
-    validation NLL, checked every ``check_every`` updates. Returns that update and the seconds spent."""
-    import copy
-
-    optimiser = th.optim.Adam(model.parameters(), lr=settings.learning_rate)
-    rng = np.random.default_rng(0)
-    best = (_nll(model, *validation), 0, copy.deepcopy(model.state_dict()))
-    start = time.perf_counter()
-    for update in range(1, updates + 1):
-        index = rng.integers(0, len(data[0]), settings.batch_size)
-        loss = model.mixture(th.as_tensor(data[0][index])).nll(th.as_tensor(data[1][index]))
-        optimiser.zero_grad()
-        loss.backward()
-        th.nn.utils.clip_grad_norm_(model.parameters(), settings.max_grad_norm)
-        optimiser.step()
-        if update % check_every == 0:
-            score = _nll(model, *validation)
-            if score < best[0]:
-                best = (score, update, copy.deepcopy(model.state_dict()))
-    model.load_state_dict(best[2])
-    return best[1], time.perf_counter() - start
-
-
 def quality(args: argparse.Namespace) -> None:
     from pecli.belief.model import LEARNED_KINDS, BeliefModel
+    from pecli.rl.belief_quality import (
+        belief_means,
+        collect_windows,
+        fit_belief,
+        last_sighting,
+        location_error,
+    )
     from pecli.scenario import load_scenario
 
     th.manual_seed(0)
@@ -200,48 +125,47 @@ def quality(args: argparse.Namespace) -> None:
     evaders = ["random-walk", "greedy", "rash"]
     learned = [kind for kind in args.kinds if kind in LEARNED_KINDS]
     if learned:
-        train_x, train_y, _ = _windows(scenario, evaders, args.games, seed=0)
-        valid_x, valid_y, _ = _windows(scenario, evaders, max(args.games // 10, 10), seed=500)
-    test_x, test_y, test_unseen = _windows(scenario, evaders, args.test_games, seed=1000)
-    half = np.array(scenario.arena.half)
+        train = collect_windows(scenario, "pure-pursuit", evaders, args.games, seed=0)
+        valid = collect_windows(scenario, "pure-pursuit", evaders, max(args.games // 10, 10), seed=500)
+    test = collect_windows(scenario, "pure-pursuit", evaders, args.test_games, seed=1000)
     settings = scenario.training.belief_settings
     t = scenario.training
     samples = -(-t.history_length // t.history_stride)
     kwargs = {
-        "window": (samples, test_x.shape[1] // samples),
+        "window": (samples, test.history.shape[1] // samples),
         "scenario": scenario.model_dump(mode="json"),
         "role": "pursuer",
     }
-    decoder = BeliefModel("ukf", **kwargs).decoder
-    last, sighted = _last_seen(decoder, test_x)
+    last, sighted = last_sighting(BeliefModel("ukf", **kwargs).decoder, test.history)
     means: dict[str, np.ndarray] = {"last seen": last, "centre": np.zeros_like(last)}
     for kind in args.kinds:
         model = BeliefModel(kind, **kwargs)
         if model.learned:
-            best, seconds = _fit(
-                model, (train_x, train_y), (valid_x, valid_y), settings, args.updates, args.check_every
+            fit = fit_belief(model, train, valid, settings, args.updates, args.check_every)
+            print(
+                f"{kind}: {args.updates} updates in {fit.seconds:.0f} s; kept update {fit.kept_update} "
+                "(best validation NLL)"
             )
-            print(f"{kind}: {args.updates} updates in {seconds:.0f} s; kept update {best} (best validation NLL)")
-        means[kind] = _mean(model, test_x)
+        means[kind] = belief_means(model, test.history)
     fitted = (
-        f"{len(train_x)} training windows ({args.games} games per evader), up to {args.updates} updates "
+        f"{len(train)} training windows ({args.games} games per evader), up to {args.updates} updates "
         f"of batch {settings.batch_size}; "
         if learned
         else ""
     )
     print(
-        f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {fitted}{int(test_unseen.sum())} held-out "
+        f"\n{scenario.name}: pure pursuit vs {', '.join(evaders)}; {fitted}{int(test.unseen.sum())} held-out "
         f"unseen moments ({args.test_games} other games per evader)"
     )
     groups = {
-        "all unseen": test_unseen,
-        "a sighting in the window": test_unseen & sighted,
-        "none in the window": test_unseen & ~sighted,
+        "all unseen": test.unseen,
+        "a sighting in the window": test.unseen & sighted,
+        "none in the window": test.unseen & ~sighted,
     }
     print("| belief | " + " | ".join(f"{name} ({int(mask.sum())})" for name, mask in groups.items()) + " |")
     print("| --- |" + " ---: |" * len(groups))
-    errors = {kind: np.linalg.norm((mean - test_y) * half, axis=1) for kind, mean in means.items()}
-    for kind, error in sorted(errors.items(), key=lambda item: item[1][test_unseen].mean()):
+    errors = {kind: location_error(scenario, mean, test.target) for kind, mean in means.items()}
+    for kind, error in sorted(errors.items(), key=lambda item: item[1][test.unseen].mean()):
         print(f"| {kind} | " + " | ".join(f"{error[mask].mean():.2f}" for mask in groups.values()) + " |")
 
 

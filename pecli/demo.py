@@ -61,6 +61,7 @@ def run_demo(
     """Train, measure, export and draw into ``out`` (a zoo folder and the pictures); replaces an earlier demo."""
     import shutil
 
+    from pecli.exploit import check_cpu_minutes
     from pecli.export import export_checkpoint
     from pecli.match import play_match
     from pecli.policies import resolve_policy
@@ -68,8 +69,9 @@ def run_demo(
     from pecli.rl.train import TrainJob, train
     from pecli.zoo import read_metadata
 
-    if cpu_minutes <= 0 or episodes < 1:
-        raise PecliError("--cpu-minutes must be positive and --episodes at least 1")
+    check_cpu_minutes(cpu_minutes)
+    if episodes < 1:
+        raise PecliError("--episodes must be at least 1")
     scenario = demo_scenario()
     zoo = out / "zoo"
     if (zoo / RUN_NAME).exists():

@@ -980,3 +980,7 @@ def test_a_cluster_address_where_nothing_answers_is_refused_at_once() -> None:
         port = closed.getsockname()[1]
     with pytest.raises(PecliError, match=f"cannot join the Ray cluster at ray://127.0.0.1:{port}: nothing answers"):
         _check_reachable(f"ray://127.0.0.1:{port}")
+    with pytest.raises(PecliError, match="the port must be from 1 to 65535"):
+        _check_reachable("127.0.0.1:99999999999999999999")
+    with pytest.raises(PecliError, match="no host 'no-such-host.invalid'"):
+        _check_reachable("no-such-host.invalid:6379")

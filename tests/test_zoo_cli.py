@@ -111,6 +111,12 @@ def test_rm_asks_and_deletes(zoo: Path, tmp_path: Path) -> None:
         refused = invoke("zoo", "rm", str(target), "--yes")
         assert refused.exit_code == 1 and "refusing to delete it" in refused.output, refused.output
     assert (project / "src" / "main.py").is_file() and photos.is_file() and photos.with_suffix(".json").is_file()
+    shutil.copytree(zoo / "e", copy / "e2")
+    broken = copy / "e2" / "evader" / "final.zip"  # a damaged checkpoint of a run, its metadata damaged too
+    broken.write_bytes(b"PK")
+    broken.with_suffix(".json").write_text("{}")
+    assert invoke("zoo", "rm", str(broken), "--yes").exit_code == 0
+    assert not broken.exists() and not broken.with_suffix(".json").exists()
 
 
 def test_play_takes_the_scenario_a_checkpoint_was_trained_on(zoo: Path) -> None:

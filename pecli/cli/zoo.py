@@ -119,6 +119,11 @@ def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:
 RUN_MARKS = ("command.txt", "run.json", "selfplay.json")  # what pecli writes into every run folder it makes
 
 
+def _is_run(folder: Path) -> bool:
+    """Whether ``folder`` is a run folder pecli made."""
+    return (folder / "config.yaml").is_file() and any((folder / mark).is_file() for mark in RUN_MARKS)
+
+
 @app.command("rm")
 @user_errors
 def remove(
@@ -127,15 +132,14 @@ def remove(
 ) -> None:
     """Delete a run (its folder) or one checkpoint (the zip and its metadata).
 
-    Only what pecli wrote: a folder with a run's config.yaml and command.txt (or run.json), a zip with a
-    checkpoint's metadata beside it or a checkpoint's entries inside.
+    Only what pecli wrote: a run folder (its config.yaml beside a command.txt, run.json or selfplay.json), a
+    checkpoint zip (its metadata beside it, a checkpoint's entries inside, or, damaged, in a run's role folder).
     """
     from pecli.locks import locked
     from pecli.zoo import ZooError, checkpoint_problem, metadata_path, read_metadata
 
-    metadata = False  # whether the .json beside a checkpoint is its pecli metadata (deleted with it)
     if target.is_dir():
-        if not (target / "config.yaml").is_file() or not any((target / f).is_file() for f in RUN_MARKS):
+        if not _is_run(target):
             raise PecliError(
                 f"{target} is not a pecli run folder (a config.yaml and a {' or '.join(RUN_MARKS)}): "
                 "refusing to delete it"
@@ -144,9 +148,8 @@ def remove(
     elif target.is_file() and target.suffix == ".zip":
         try:
             read_metadata(target)
-            metadata = True
         except ZooError:
-            if checkpoint_problem(target):
+            if checkpoint_problem(target) and not _is_run(target.resolve().parent.parent):
                 raise PecliError(f"{target} is not a pecli checkpoint: refusing to delete it") from None
         what = f"checkpoint {target}"
     else:
@@ -158,8 +161,7 @@ def remove(
             shutil.rmtree(target)
     else:
         target.unlink()
-        if metadata:
-            metadata_path(target).unlink(missing_ok=True)
+        metadata_path(target).unlink(missing_ok=True)  # the checkpoint's, damaged or not
     err_console.print(f"deleted {what}", highlight=False)
 
 

@@ -99,11 +99,16 @@ def _check_reachable(address: str) -> None:
     host, _, port = address.removeprefix("ray://").rpartition(":")
     if not host or not port.isdigit():
         return
+    if not 0 < int(port) < 65536:
+        raise PecliError(f"--address {address}: the port must be from 1 to 65535")
+    host = host.strip("[]")
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S):
+        with socket.create_connection((host, int(port)), timeout=PROBE_TIMEOUT_S):
             pass
-    except (OSError, ValueError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__
+    except socket.gaierror as exc:
+        raise PecliError(f"cannot join the Ray cluster at {address}: no host '{host}' ({exc.strerror})") from None
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
         raise PecliError(f"cannot join the Ray cluster at {address}: nothing answers there ({reason})") from None
 
 
@@ -116,6 +121,8 @@ class RayCluster:
             raise PecliError(f"--cpus must be at least 1, got {cpus}")
         if address is not None and cpus is not None:
             raise PecliError("--cpus sizes an embedded Ray; a cluster joined with --address has its own CPUs")
+        if address is not None:
+            _check_reachable(address)  # before the caller writes anything
         self.address = address
         self.cpus = cpus
         self._connected_here = False
@@ -123,8 +130,6 @@ class RayCluster:
     def __enter__(self) -> RayCluster:
         if ray.is_initialized():  # e.g. a test connected to its own cluster already
             return self
-        if self.address is not None:
-            _check_reachable(self.address)
         options: dict[str, Any] = {"log_to_driver": False}  # the runs' output stays in Ray's logs
         if not (self.address or "").startswith("ray://"):  # Ray Client passes these on to the remote driver
             options.update(include_dashboard=False, configure_logging=False)

@@ -103,14 +103,16 @@ def _mixture_member(spec: str, folder: Path) -> str:
         if not member.is_file():  # else resolve_policy would take 'module:x.zip' for code to import
             raise PolicyError(f"the mixture names the policy file {spec}, which is not there")
         return str(member)
-    if ":" not in spec:  # a misspelt name, not code
+    if ":" not in spec:  # a misspelt name or a missing file, not code
+        if "/" in spec or os.sep in spec:
+            raise PolicyError(f"the mixture names {spec}, which is not there")
         raise PolicyError(
             f"the mixture names '{spec}', which is neither a built-in ({', '.join(builtin_names())}) nor a policy file"
         )
     if not trusted():
         raise PolicyError(
             f"the mixture names '{spec}', which is neither a built-in nor a policy file: pecli imports "
-            "no code a file names unless you pass `pecli --trust`"
+            "no code a mixture or a file names unless you pass `pecli --trust`"
         )
     return spec
 

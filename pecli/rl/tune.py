@@ -53,12 +53,26 @@ warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
-def _not_an_interrupt(record: logging.LogRecord) -> bool:
-    """Drop Optuna's traceback of a trial stopped by Ctrl-C (the command says it was interrupted)."""
-    return not (record.exc_info and isinstance(record.exc_info[1], KeyboardInterrupt))
+class _NoInterruptReport(logging.Filter):
+    """Drop Optuna's two lines on a trial stopped by Ctrl-C (its traceback, then "failed with value None"): the
+    command says it was interrupted, and the trial runs again on ``--resume``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.interrupted: str | None = None  # the "Trial N " of the interrupt just dropped
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if record.exc_info and isinstance(record.exc_info[1], KeyboardInterrupt):
+            self.interrupted = " ".join(message.split(" ")[:2]) + " "
+            return False
+        if self.interrupted is not None and message.startswith(self.interrupted + "failed with value"):
+            self.interrupted = None
+            return False
+        return True
 
 
-logging.getLogger("optuna.study._optimize").addFilter(_not_an_interrupt)
+logging.getLogger("optuna.study._optimize").addFilter(_NoInterruptReport())
 
 EVAL_SEED = 7_000_003  # evaluation games: no training run starts its games from this seed
 WORKER_ATTR = "worker"  # a trial's user attribute: the host and PID of the process that runs it

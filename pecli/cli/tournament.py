@@ -28,13 +28,18 @@ def tournament(
     paths: Annotated[
         list[str] | None,
         typer.Argument(
-            help="Zoo folders, run folders, checkpoint files, exported .onnx models or module:Class policies.",
+            help="Zoo folders, run folders, checkpoint files, exported .onnx models, or any policy string "
+            "(a built-in name, hj, mix:A,B,..., nash:FOLDER, module:Class).",
             show_default=False,
         ),
     ] = None,
     config: Annotated[
         str | None,
-        typer.Option("--config", "-c", help="Scenario (default: the one the first run found was trained on)."),
+        typer.Option(
+            "--config",
+            "-c",
+            help="Scenario (default: the one the first run or policy file found was trained on, else paper).",
+        ),
     ] = None,
     baselines: Annotated[bool, typer.Option("--baselines", help="Add the built-in heuristics of both sides.")] = False,
     episodes: Annotated[int, typer.Option("--episodes", "-n", help="Episodes per seed and pairing.")] = 500,

@@ -4,10 +4,10 @@
     python benchmarks/bench_selfplay.py --skip-train --name paper-s0           # only the round robin
 
 The run is ``pecli selfplay`` itself (resumed when it exists, so an interrupted benchmark continues).
-The round robin plays every pursuer generation (plus pure pursuit) against every evader generation
-(plus the greedy evader) with the same seeds (a ``pecli tournament`` over the run's checkpoints,
-cached in ``<run>/generations``), and prints the capture-rate matrix, draws it as a heatmap, and
-checks the claim that later generations are stronger:
+The round robin (:mod:`pecli.rl.generations`, as ``pecli zoo generations RUN``) plays every pursuer generation
+(plus pure pursuit) against every evader generation (plus the greedy evader) with the same seeds (cached in
+``<run>/generations``), and prints the capture-rate matrix, draws it as a heatmap, and checks the claim that
+later generations are stronger:
 
 * pursuers: against the evader of generation j, of two pursuers trained after it (generations
   j < i < i'), the later one captures more often. Reported as the share of such ordered pairs
@@ -24,17 +24,12 @@ import os
 import subprocess
 import sys
 import time
-from itertools import combinations
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
-
-from pecli.tournament import find_players, run_tournament  # noqa: E402
+from pecli.rl.generations import draw_heatmap, round_robin  # noqa: E402
 from pecli.zoo import Run  # noqa: E402
-
-REFERENCE = {"pursuer": "pure-pursuit", "evader": "greedy"}
 
 
 def train(args: argparse.Namespace, run: Path) -> float:
@@ -84,71 +79,6 @@ def train(args: argparse.Namespace, run: Path) -> float:
     return (after.children_user - before.children_user) + (after.children_system - before.children_system)
 
 
-def generation(name: str) -> int:
-    """``round-003`` → 3; the reference baselines are generation 0."""
-    return int(name.rsplit("-", 1)[1]) if name.startswith("round-") else 0
-
-
-def round_robin(run: Path, scenario, episodes: int, workers: int):
-    """Capture rates ``(pursuers, evaders)`` with row/column labels, generation 0 the reference baselines."""
-    found = find_players([str(run)], scenario)
-    players = {role: [p for p in found.players[role]] for role in found.players}
-    extra = find_players([], scenario, baselines=True).players
-    for role in players:
-        players[role] = [p for p in extra[role] if p.spec == REFERENCE[role]] + sorted(
-            players[role], key=lambda p: generation(Path(p.spec).stem)
-        )
-    pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
-    results = run_tournament(scenario, players, pairings, episodes, [0], run / "generations", workers=workers)
-    grid = results.grid()
-    labels = {role: [_label(p) for p in players[role]] for role in players}
-    rates = np.array([[grid[(p.name, e.name)].capture_rate for e in players["evader"]] for p in players["pursuer"]])
-    return rates, labels
-
-
-def _label(player) -> str:
-    stem = Path(player.spec).stem
-    return f"g{generation(stem)}" if stem.startswith("round-") else player.spec
-
-
-def progress_share(values: np.ndarray, later_than: int) -> float:
-    """Share of ordered pairs (i < i', both > ``later_than``) with values[i'] > values[i], ties half."""
-    gens = [g for g in range(len(values)) if g > later_than]
-    pairs = list(combinations(gens, 2))
-    if not pairs:
-        return float("nan")
-    return float(np.mean([1.0 if values[b] > values[a] else 0.5 if values[b] == values[a] else 0.0 for a, b in pairs]))
-
-
-def claims(rates: np.ndarray) -> tuple[float, float]:
-    """(pursuer progress, evader progress) over the learned generations (index = generation, 0 = reference)."""
-    learned = rates[1:, 1:]  # generation g at index g - 1
-    n = learned.shape[0]
-    pursuer = [progress_share(np.r_[np.nan, learned[:, j]], later_than=j + 1) for j in range(n)]
-    evader = [progress_share(np.r_[np.nan, 1 - learned[i, :]], later_than=i) for i in range(n)]  # same round too
-    return float(np.nanmean(pursuer)), float(np.nanmean(evader))
-
-
-def heatmap(rates: np.ndarray, labels: dict[str, list[str]], out: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(1.0 + 0.6 * rates.shape[1], 1.0 + 0.5 * rates.shape[0]))
-    image = ax.imshow(rates, vmin=0, vmax=1, cmap="viridis")
-    ax.set_xticks(range(rates.shape[1]), labels["evader"], rotation=45, ha="right")
-    ax.set_yticks(range(rates.shape[0]), labels["pursuer"])
-    ax.set_xlabel("evader generation")
-    ax.set_ylabel("pursuer generation")
-    for (i, j), value in np.ndenumerate(rates):
-        ax.text(j, i, f"{value:.2f}", ha="center", va="center", color="white" if value < 0.6 else "black", fontsize=7)
-    fig.colorbar(image, ax=ax, label="capture rate")
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="paper")
@@ -171,13 +101,14 @@ def main() -> None:
         print(f"self-play: {cpu / 60:.1f} CPU-minutes", flush=True)
     scenario = Run(run).scenario()
     start = time.perf_counter()
-    rates, labels = round_robin(run, scenario, args.episodes, args.workers)
+    result = round_robin(run, scenario, args.episodes, [0], args.workers)
+    rates, labels = result.rates, result.labels
     print(f"round robin: {rates.size} pairings x {args.episodes} episodes in {time.perf_counter() - start:.0f} s\n")
     width = max(len(x) for x in labels["pursuer"]) + 2
     print(" " * width + "".join(f"{x:>9}" for x in labels["evader"]))
     for label, row in zip(labels["pursuer"], rates):
         print(f"{label:<{width}}" + "".join(f"{v:9.2f}" for v in row))
-    pursuer, evader = claims(rates)
+    pursuer, evader = result.progress()
     print(
         f"\nlater pursuers beat older evaders more often than earlier pursuers did: {pursuer:.2f} of pairs (> 0.5: yes)"
     )
@@ -185,9 +116,8 @@ def main() -> None:
         f"later evaders escape older pursuers more often than earlier evaders did: {evader:.2f} of pairs (> 0.5: yes)"
     )
     steps = scenario.training.selfplay.steps_per_round
-    heatmap(
-        rates,
-        labels,
+    draw_heatmap(
+        result,
         args.out,
         f"{run.name}: capture rate, generation vs generation\n"
         f"{steps:,} steps per side per round, {args.episodes} episodes per cell",

@@ -529,3 +529,31 @@ def test_experiment_compare_plays_a_run_against_its_fork(finished: tuple[Path, l
     assert len(rows) == 2 and all("| sp | 2 |" in row for row in rows)
     assert rows[0].split("|")[4:8] == rows[1].split("|")[4:8]  # the same weights: one player, the same games
     assert "- forked" in result.stdout and "a paired test needs 2 runs" in result.stdout
+
+
+def test_generations_play_every_round_against_every_round(finished: tuple[Path, list[str]], tmp_path: Path) -> None:
+    run = tmp_path / "sp"
+    shutil.copytree(finished[0], run)
+    result = CliRunner().invoke(app, ["zoo", "generations", str(run), "-n", "4", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["pursuers"] == ["pure-pursuit", "g1", "g2"] and data["evaders"] == ["greedy", "g1", "g2"]
+    assert np.array(data["capture_rates"]).shape == (3, 3)
+    assert data["pursuer_progress"] is None  # no evader generation has two pursuer generations after it
+    assert data["evader_progress"] in (0.0, 0.5, 1.0)  # the one pair: generations 1 and 2 against pursuer 1
+    assert (run / "generations" / "generations.png").is_file()
+    refused = CliRunner().invoke(app, ["zoo", "generations", str(run / "pursuer")])
+    assert refused.exit_code == 1
+
+
+def test_progress_counts_later_generations_beating_older_opponents() -> None:
+    from pecli.rl.generations import Generations, progress_share
+
+    assert progress_share(np.array([np.nan, 0.2, 0.5, 0.9]), later_than=0) == 1.0  # every later one does better
+    assert progress_share(np.array([np.nan, 0.9, 0.5, 0.2]), later_than=0) == 0.0
+    assert progress_share(np.array([np.nan, 0.5, 0.5]), later_than=0) == 0.5  # a tie counts half
+    assert math.isnan(progress_share(np.array([np.nan, 0.5]), later_than=0))
+    improving = np.array([[0.5, 0.5, 0.5, 0.5], [0.5, 0.2, 0.1, 0.05], [0.5, 0.6, 0.3, 0.2], [0.5, 0.9, 0.7, 0.4]])
+    labels = {"pursuer": ["pp", "g1", "g2", "g3"], "evader": ["greedy", "g1", "g2", "g3"]}
+    pursuer, evader = Generations(labels, improving, 10).progress()  # type: ignore[arg-type]
+    assert pursuer == 1.0 and evader == 1.0  # each generation beats what came before it better than its elders did

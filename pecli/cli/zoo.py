@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -276,4 +277,67 @@ def fork(
     added = f", with {', '.join(add)} in its pools" if add else ""
     console.print(
         f"{target}: a copy of {run} at {run_cpu_hours(target):.2f} CPU-h{added}", highlight=False, markup=False
+    )
+
+
+@app.command("generations")
+@user_errors
+def generations(
+    run: Annotated[Path, typer.Argument(help="A self-play run folder.", show_default=False)],
+    episodes: Annotated[int, typer.Option("--episodes", "-n", min=1, help="Games per seed and pairing.")] = 200,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Seeds per pairing (0 .. K-1).")] = 1,
+    workers: Annotated[int, typer.Option("--workers", "-w", min=1, help="Processes playing pairings.")] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the matrix and the progress as JSON.")] = False,
+) -> None:
+    """Play a self-play run's generations against each other: every round's pursuer against every round's evader,
+    pure pursuit and the greedy evader as generation 0.
+
+    Prints the capture-rate matrix and two progress shares: how often, of two pursuers trained after an evader,
+    the later one catches it more (and likewise for evaders escaping older pursuers). Above 0.5 the run improves on
+    what it has met; near 0.5 it goes round in circles. The games are cached in RUN/generations, with the matrix as
+    RUN/generations/generations.png.
+    """
+    from pecli.cli.common import require_batch
+    from pecli.rl.generations import GENERATIONS_DIR, draw_heatmap, round_robin
+    from pecli.zoo import Run
+
+    require_batch(episodes, "add --seeds instead")
+    scenario = Run(run).scenario()
+    result = round_robin(run, scenario, episodes, list(range(seeds)), workers)
+    pursuer, evader = result.progress()
+    picture = draw_heatmap(
+        result,
+        run / GENERATIONS_DIR / "generations.png",
+        f"{run.name}: capture rate, generation against generation ({episodes * seeds} games a cell)",
+    )
+    if as_json:
+        data = {
+            "run": str(run),
+            "episodes": episodes * seeds,
+            "pursuers": result.labels["pursuer"],
+            "evaders": result.labels["evader"],
+            "capture_rates": result.rates.round(4).tolist(),
+            "pursuer_progress": None if math.isnan(pursuer) else pursuer,
+            "evader_progress": None if math.isnan(evader) else evader,
+            "picture": str(picture),
+        }
+        console.print_json(json.dumps(data))
+        return
+    table = Table(title=f"{run.name}: capture rate, pursuer generation (rows) against evader generation")
+    table.add_column("")
+    for label in result.labels["evader"]:
+        table.add_column(label, justify="right")
+    for label, row in zip(result.labels["pursuer"], result.rates):
+        table.add_row(label, *(f"{value:.2f}" for value in row))
+    console.print(table)
+
+    def shown(value: float) -> str:
+        return "- (too few generations)" if math.isnan(value) else f"{value:.2f}"
+
+    console.print(
+        f"later pursuers catch older evaders more often than earlier pursuers did: {shown(pursuer)} of pairs\n"
+        f"later evaders escape older pursuers more often than earlier evaders did: {shown(evader)} of pairs\n"
+        f"(above 0.5: progress; near 0.5: cycling)   picture: {picture}",
+        highlight=False,
+        markup=False,
     )

@@ -544,6 +544,9 @@ def test_generations_play_every_round_against_every_round(finished: tuple[Path, 
     assert (run / "generations" / "generations.png").is_file()
     refused = CliRunner().invoke(app, ["zoo", "generations", str(run / "pursuer")])
     assert refused.exit_code == 1
+    from pecli.rl.generations import generation_checkpoints
+
+    assert [p.stem for p in generation_checkpoints(run, every=2)["evader"]] == ["round-002"]  # the last kept
 
 
 def test_progress_counts_later_generations_beating_older_opponents() -> None:

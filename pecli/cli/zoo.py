@@ -287,6 +287,9 @@ def generations(
     episodes: Annotated[int, typer.Option("--episodes", "-n", min=1, help="Games per seed and pairing.")] = 200,
     seeds: Annotated[int, typer.Option("--seeds", min=1, help="Seeds per pairing (0 .. K-1).")] = 1,
     workers: Annotated[int, typer.Option("--workers", "-w", min=1, help="Processes playing pairings.")] = 1,
+    every: Annotated[
+        int, typer.Option("--every", min=1, help="Every K-th round only, counted back from the last (a long run).")
+    ] = 1,
     as_json: Annotated[bool, typer.Option("--json", help="Print the matrix and the progress as JSON.")] = False,
 ) -> None:
     """Play a self-play run's generations against each other: every round's pursuer against every round's evader,
@@ -303,7 +306,7 @@ def generations(
 
     require_batch(episodes, "add --seeds instead")
     scenario = Run(run).scenario()
-    result = round_robin(run, scenario, episodes, list(range(seeds)), workers)
+    result = round_robin(run, scenario, episodes, list(range(seeds)), workers, every=every)
     pursuer, evader = result.progress()
     picture = draw_heatmap(
         result,

@@ -63,12 +63,16 @@ def progress_share(values: np.ndarray, later_than: int) -> float:
     return float(np.mean([1.0 if values[b] > values[a] else 0.5 if values[b] == values[a] else 0.0 for a, b in pairs]))
 
 
-def generation_checkpoints(run: Path) -> dict[Role, list[Path]]:
-    """Each main learner's round checkpoints, oldest first; :class:`PecliError` if the run has none."""
+def generation_checkpoints(run: Path, every: int = 1) -> dict[Role, list[Path]]:
+    """Each main learner's round checkpoints, oldest first: every ``every``-th round (counted from the last, which
+    is always kept); :class:`PecliError` if the run has none."""
+    if every < 1:
+        raise PecliError(f"--every must be at least 1, not {every}")
     found = {role: sorted((run / role).glob("round-*.zip"), key=lambda p: _generation(p.stem)) for role in ROLES}
     for role, paths in found.items():
         if not paths:
             raise PecliError(f"{run} has no {role} round checkpoints ({role}/round-NNN.zip): is it a self-play run?")
+        found[role] = paths[::-1][::every][::-1]
     return found
 
 
@@ -87,12 +91,13 @@ def round_robin(
     seeds: list[int] | None = None,
     workers: int = 1,
     on_result: Callable[[str], None] | None = None,
+    every: int = 1,
 ) -> Generations:
-    """Every pursuer generation of ``run`` (and the reference) against every evader generation, ``episodes`` games
-    per seed and pairing, cached in ``run/generations``."""
+    """Every pursuer generation of ``run`` (and the reference) against every evader generation (every ``every``-th
+    round of a long run), ``episodes`` games per seed and pairing, cached in ``run/generations``."""
     from pecli.tournament import find_players, run_tournament
 
-    checkpoints = generation_checkpoints(run)
+    checkpoints = generation_checkpoints(run, every)
     paths = [str(path) for role in ROLES for path in checkpoints[role]]
     found = find_players([*paths, *REFERENCE.values()], scenario).players
     by_spec = {role: {Path(p.spec).resolve(): p for p in found[role] if p.spec.endswith(".zip")} for role in ROLES}

@@ -306,7 +306,15 @@ def generations(
 
     require_batch(episodes, "add --seeds instead")
     scenario = Run(run).scenario()
-    result = round_robin(run, scenario, episodes, list(range(seeds)), workers, every=every)
+    result = round_robin(
+        run,
+        scenario,
+        episodes,
+        list(range(seeds)),
+        workers,
+        on_result=lambda line: err_console.print(line, highlight=False, markup=False),
+        every=every,
+    )
     pursuer, evader = result.progress()
     picture = draw_heatmap(
         result,

@@ -21,12 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import combinations
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pecli.errors import PecliError
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
+
+if TYPE_CHECKING:
+    from pecli.tournament import PairingResult
 
 REFERENCE: dict[Role, str] = {"pursuer": "pure-pursuit", "evader": "greedy"}  # generation 0
 GENERATIONS_DIR = "generations"
@@ -94,7 +98,8 @@ def round_robin(
     every: int = 1,
 ) -> Generations:
     """Every pursuer generation of ``run`` (and the reference) against every evader generation (every ``every``-th
-    round of a long run), ``episodes`` games per seed and pairing, cached in ``run/generations``."""
+    round of a long run), ``episodes`` games per seed and pairing, cached in ``run/generations``; ``on_result``
+    hears a line per pairing (``k/N pursuer vs evader: rate``)."""
     from pecli.tournament import find_players, run_tournament
 
     checkpoints = generation_checkpoints(run, every)
@@ -107,7 +112,13 @@ def round_robin(
         for role in ROLES
     }
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
-    report = None if on_result is None else (lambda r, cached: on_result(f"{r.pursuer} vs {r.evader}"))
+    done = [0]
+
+    def report(result: PairingResult, cached: bool) -> None:
+        done[0] += 1
+        if on_result is not None:
+            on_result(f"{done[0]}/{len(pairings)} {result.pursuer} vs {result.evader}: {result.capture_rate:.2f}")
+
     results = run_tournament(
         scenario, players, pairings, episodes, seeds or [0], run / GENERATIONS_DIR, workers=workers, on_result=report
     )

@@ -79,15 +79,10 @@ def _read(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _trained_all_steps(run: Path) -> bool:
     """Whether the run reached its ``--max-steps`` (rather than its CPU budget): it spent less CPU than asked."""
-    import json
+    from pecli.zoo import Run, read_metadata
 
-    import yaml
-
-    final = run / "pursuer" / "final.json"
-    if not final.is_file():
-        return False
-    steps = yaml.safe_load((run / "config.yaml").read_text())["training"]["steps"]
-    return json.loads(final.read_text())["steps"] >= steps
+    final = run / "pursuer" / "final.zip"
+    return final.is_file() and read_metadata(final).steps >= Run(run).scenario().training.steps
 
 
 def report(args: argparse.Namespace) -> None:

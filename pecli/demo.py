@@ -61,11 +61,11 @@ def run_demo(
     """Train, measure, export and draw into ``out`` (a zoo folder and the pictures); replaces an earlier demo."""
     import shutil
 
-    from pecli.exploit import check_cpu_minutes
     from pecli.export import export_checkpoint
     from pecli.match import play_match
     from pecli.policies import resolve_policy
     from pecli.render import animate_episode, draw_episodes
+    from pecli.rl.budget import check_cpu_minutes
     from pecli.rl.train import TrainJob, train
     from pecli.zoo import read_metadata
 

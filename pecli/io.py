@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
-    from pydantic import BaseModel
+    from pydantic import BaseModel, ValidationError
 
 from pecli.text import article
 
@@ -91,6 +91,12 @@ def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) ->
         raise PecliError(f"{path}: damaged {what} ({reason})") from None
 
 
+def first_problem(exc: ValidationError, top: str = "top level") -> str:
+    """``key.path: message`` of a pydantic error's first problem (``top`` for the record as a whole)."""
+    first = exc.errors()[0]
+    return f"{'.'.join(str(part) for part in first['loc']) or top}: {first['msg']}"
+
+
 def read_output_record(path: Path, model: type[RecordT], what: str) -> RecordT | None:
     """An output folder's record at ``path`` validated as ``model`` (a pydantic model); None if there is none yet;
     :class:`~pecli.errors.PecliError` in one line (``not a <what> ...; use another --out``) if it is not one."""
@@ -103,6 +109,4 @@ def read_output_record(path: Path, model: type[RecordT], what: str) -> RecordT |
     try:
         return model.model_validate(read_json(path, what))
     except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"]) or "top level"
-        raise PecliError(f"{path}: not {article(what)} ({where}: {first['msg']}); use another --out") from None
+        raise PecliError(f"{path}: not {article(what)} ({first_problem(exc)}); use another --out") from None

@@ -29,20 +29,13 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from pecli.errors import PecliError
-from pecli.exploit import (
-    MAX_CPU_MINUTES,
-    ExploitJob,
-    ExploitResult,
-    PairResult,
-    check_cpu_minutes,
-    exploit_all,
-    pair_result,
-)
+from pecli.exploit import ExploitJob, ExploitResult, PairResult, exploit_all, pair_result
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
 from pecli.metagame import META_SOLVERS, MetaGame, MetaSolver, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.policies.nash import NASH_FILE, mixture_record
+from pecli.rl.budget import MAX_CPU_MINUTES, check_cpu_minutes
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.tournament import pairing_results, player_spec

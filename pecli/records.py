@@ -12,6 +12,7 @@ from typing import Literal, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pecli.errors import PecliError
+from pecli.io import first_problem
 from pecli.roles import Role
 
 MAX_ROUNDS = 1_000_000
@@ -118,6 +119,4 @@ def validated(model: type[RecordT], data: object, path: object, what: str) -> Re
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"]) or "the record"
-        raise PecliError(f"{path}: damaged {what} ({where}: {first['msg']})") from None
+        raise PecliError(f"{path}: damaged {what} ({first_problem(exc, top='the record')})") from None

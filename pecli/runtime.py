@@ -67,14 +67,10 @@ def read_sidecar(model: str | Path) -> dict[str, Any]:
         raise ExportError(f"{path}: damaged sidecar ({exc})") from None
     except RecursionError:
         raise ExportError(f"{path}: damaged sidecar (nested too deep)") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        found = (
-            "not a JSON object"
-            if not isinstance(data, dict)
-            else "no 'format'"
-            if "format" not in data
-            else f"format {data['format']!r}"
-        )
+    if not isinstance(data, dict):
+        raise ExportError(f"{path}: not a pecli sidecar (not a JSON object)")
+    if data.get("format") != FORMAT:
+        found = f"format {data['format']!r}" if "format" in data else "no 'format'"
         raise ExportError(f"{path}: not a pecli sidecar of format {FORMAT} ({found})")
     return data
 

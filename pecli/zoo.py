@@ -122,12 +122,12 @@ class CheckpointMeta:
         """The metadata in ``data`` (unknown keys ignored); ``ValueError`` naming the fields it lacks."""
         from dataclasses import MISSING, fields
 
-        required = [f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING]
+        every = fields(cls)
+        required = [f.name for f in every if f.default is MISSING and f.default_factory is MISSING]
         missing = [name for name in required if name not in data]
         if missing:
             raise ValueError(f"no {', '.join(missing)}")
-        known = {f for f in cls.__dataclass_fields__}
-        return cls(**{k: v for k, v in data.items() if k in known})
+        return cls(**{f.name: data[f.name] for f in every if f.name in data})
 
 
 def metadata_path(checkpoint: Path) -> Path:

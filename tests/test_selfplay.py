@@ -542,8 +542,9 @@ def test_generations_play_every_round_against_every_round(finished: tuple[Path, 
     assert data["pursuer_progress"] is None  # no evader generation has two pursuer generations after it
     assert data["evader_progress"] in (0.0, 0.5, 1.0)  # the one pair: generations 1 and 2 against pursuer 1
     assert (run / "generations" / "generations.png").is_file()
-    refused = CliRunner().invoke(app, ["zoo", "generations", str(run / "pursuer")])
-    assert refused.exit_code == 1
+    for where in (run / "pursuer", tmp_path / "missing"):
+        refused = CliRunner().invoke(app, ["zoo", "generations", str(where)])
+        assert refused.exit_code == 1 and "is not a run folder" in refused.output, refused.output
     from pecli.rl.generations import generation_checkpoints
 
     assert [p.stem for p in generation_checkpoints(run, every=2)["evader"]] == ["round-002"]  # the last kept

@@ -90,8 +90,8 @@ def train(
     continues it from its newest checkpoint, replay buffer included.
     TensorBoard logs are in zoo/<run>/tb.
     """
-    from pecli.exploit import check_cpu_minutes
     from pecli.models.algorithms import torch_device
+    from pecli.rl.budget import check_cpu_minutes
     from pecli.rl.resume import resume_train
     from pecli.rl.train import (
         TrainingInterrupted,

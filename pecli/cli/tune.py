@@ -51,8 +51,8 @@ StorageOption = Annotated[
 
 
 def _tune(what: str, **options: Any) -> None:
-    from pecli.exploit import check_cpu_minutes
     from pecli.models.algorithms import torch_device
+    from pecli.rl.budget import check_cpu_minutes
     from pecli.rl.search_space import load_space
     from pecli.rl.tune import (
         TuneSettings,

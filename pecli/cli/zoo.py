@@ -305,6 +305,8 @@ def generations(
     from pecli.zoo import Run
 
     require_batch(episodes, "add --seeds instead")
+    if not _is_run(run):
+        raise PecliError(f"{run} is not a run folder (a config.yaml and a {' or '.join(RUN_MARKS)})")
     scenario = Run(run).scenario()
     result = round_robin(
         run,

@@ -82,7 +82,7 @@ def nash_path(options: str) -> Path:
 def read_nash(path: Path) -> NashRecord:
     """The mixture record at ``path``, validated; :class:`PolicyError` in one line if it is not one."""
     from pecli.errors import PecliError
-    from pecli.io import read_json
+    from pecli.io import first_problem, read_json
 
     try:
         data = read_json(path, "Nash mixture (pecli tournament --nash)")
@@ -90,9 +90,7 @@ def read_nash(path: Path) -> NashRecord:
     except PecliError as exc:
         raise PolicyError(str(exc)) from None
     except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"]) or "top level"
-        raise PolicyError(f"{path}: not a Nash mixture ({where}: {first['msg']})") from None
+        raise PolicyError(f"{path}: not a Nash mixture ({first_problem(exc)})") from None
 
 
 def load_nash_policy(options: str, role: Role, scenario: Scenario, member: Callable[[str, Path], Policy]) -> Policy:

@@ -1,4 +1,5 @@
-"""A self-play run's CPU budget, read from its turns: one rule for ``pecli selfplay`` and ``pecli experiment``.
+"""CPU budgets: the bounds of a ``--cpu-minutes`` (train, exploit, psro, tune, demo), and a self-play run's
+budget read from its turns, one rule for ``pecli selfplay`` and ``pecli experiment``.
 
 A run stops after the first round at which its recorded CPU time (every turn's, exploiters' included) reaches
 its budget. Only whole rounds count, those with every turn recorded (both main learners' and the league
@@ -8,6 +9,7 @@ exploiters' scheduled in them), so a half-played round never ends a run. The fun
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +20,16 @@ if TYPE_CHECKING:
     from pecli.scenario import SelfPlay as SelfPlaySettings
 
 MAX_CPU_HOURS = 10_000  # the largest budget a run takes (pecli selfplay --cpu-hours, an experiment's runs.cpu_hours)
+MAX_CPU_MINUTES = 100_000.0  # the largest --cpu-minutes
+
+
+def check_cpu_minutes(cpu_minutes: float) -> None:
+    """:class:`PecliError` unless ``cpu_minutes`` is a finite budget in (0, :data:`MAX_CPU_MINUTES`]."""
+    from pecli.errors import PecliError
+
+    if not 0 < cpu_minutes <= MAX_CPU_MINUTES or not math.isfinite(cpu_minutes):
+        raise PecliError(f"--cpu-minutes must be in (0, {MAX_CPU_MINUTES:g}], not {cpu_minutes}")
+
 
 Turns = Sequence[Mapping[str, Any]]
 

@@ -123,11 +123,9 @@ def validation_problems(exc: ValidationError, source: str) -> list[str]:
 
 def validation_message(exc: ValidationError, source: str) -> str:
     """One line for a pydantic error: ``<source>: <key.path>: <problem> (and N more problems)``."""
-    errors = exc.errors()
-    first = errors[0]
-    where = _location(dict(first))
-    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-    return f"{source}: {where or 'top level'}: {_describe(dict(first))}{more}"
+    problems = validation_problems(exc, source)
+    more = len(problems) - 1
+    return problems[0] + (f" (and {more} more problem{'s' if more > 1 else ''})" if more else "")
 
 
 class StrictLoader(yaml.SafeLoader):

@@ -6,6 +6,10 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pecli-installed
 DOCS_STAMP := $(VENV)/.pecli-docs-installed
+# PyPI's Linux torch wheel is the CUDA build (several GB); this index holds the CPU one (torch==2.13.0+cpu), which pip
+# prefers as the higher version. Where it cannot be reached, torch comes from pip's own indexes.
+# Empty it (make test TORCH_INDEX=) to use only pip's own configuration.
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 
 .PHONY: install demo test lint docs release-check bench clean
 
@@ -14,7 +18,13 @@ $(PY):
 
 $(STAMP): $(PY) pyproject.toml
 	@echo "installing torch 2.13.0 (CPU wheel), then pecli and its dependencies into $(VENV): 2-3 minutes the first time"
-	$(PY) -m pip install --progress-bar on "torch==2.13.0"
+	@if [ -n "$(TORCH_INDEX)" ] && $(PY) -c "import sys, urllib.request; urllib.request.urlopen(sys.argv[1], timeout=10)" "$(TORCH_INDEX)" 2>/dev/null; then \
+		echo "$(PY) -m pip install --extra-index-url $(TORCH_INDEX) torch==2.13.0"; \
+		$(PY) -m pip install --progress-bar on --extra-index-url "$(TORCH_INDEX)" "torch==2.13.0"; \
+	else \
+		echo "$(PY) -m pip install torch==2.13.0 (from pip's own indexes: $(or $(TORCH_INDEX),no TORCH_INDEX) not reached)"; \
+		$(PY) -m pip install --progress-bar on "torch==2.13.0"; \
+	fi
 	@echo "torch installed; now pecli with its dev extra"
 	$(PY) -m pip install --progress-bar on -e ".[dev]"
 	@touch $(STAMP)

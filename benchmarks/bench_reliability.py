@@ -5,8 +5,8 @@ each through the real CLI (``python -m pecli ...``) in a subprocess.
     python benchmarks/bench_reliability.py --only inputs nan       # some parts: inputs, nan, kills, writers
     python benchmarks/bench_reliability.py --source /tmp/pecli-main  # the same cases against other code
 
-A bad input is *refused cleanly* when the command exits with code 1 and prints exactly one
-``error:`` line and no traceback; an *internal error* is exit code 2, a traceback or any other
+A bad input is *refused cleanly* when the command exits with code 1 (2: a usage error) and prints exactly one
+``error:`` line and no traceback; an *internal error* is exit code 3, a traceback or any other
 crash; *accepted* means it exited 0 (the input went through). Kills: a tournament with two
 workers, one stuck in a pairing that never ends, is killed (SIGKILL or SIGTERM) once a pairing is
 cached; processes of it still alive 10 s later are orphans. Writers: two tournaments with the

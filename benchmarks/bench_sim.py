@@ -1,6 +1,6 @@
 """Simulator speed: game-steps/s of the batched game and of the PettingZoo env, next to MPE simple_tag_v3.
 
-    python benchmarks/bench_sim.py                 # the full run recorded in docs/benchmarks.md
+    python benchmarks/bench_sim.py                 # the full run recorded in docs/benchmarks/simulator.md
     python benchmarks/bench_sim.py --quick         # a short smoke run
 
 Everything is measured in one process, on one thread, in the same run, so the ratios hold

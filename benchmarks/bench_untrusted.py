@@ -184,7 +184,7 @@ def main() -> None:
             executed = marker.exists()
             marker.unlink(missing_ok=True)
             ran += executed
-            internal += result.returncode not in (0, 1)
+            internal += result.returncode not in (0, 1, 2)  # 3: pecli's internal error; else a crash
             lines = [line for line in (result.stderr + result.stdout).strip().splitlines() if line.startswith("error")]
             rows.append((label, name, result.returncode, "YES" if executed else "no", lines[0][:110] if lines else ""))
     print("| file | command | exit | payload ran | refusal |\n| --- | --- | ---: | --- | --- |")
@@ -201,7 +201,7 @@ def edit_json(path: Path, **changes: object) -> None:
 
 def hostile_records(out: Path, clean: Path) -> None:
     """Records that name code or paths, or claim sizes, each given to the command that reads it; every outcome
-    counted by class: refused (exit 1, an error line), accepted (exit 0), internal (any other exit), payload (code
+    counted by class: refused (exit 1 or 2, an error line), accepted (exit 0), internal (any other exit), payload (code
     ran, or a file outside the zoo changed)."""
     deep = "[" * 100_000 + "]" * 100_000
 
@@ -226,7 +226,7 @@ def hostile_records(out: Path, clean: Path) -> None:
             "payload"
             if payload
             else "refused"
-            if result.returncode == 1
+            if result.returncode in (1, 2)
             else "accepted"
             if result.returncode == 0
             else "internal"

@@ -4,9 +4,10 @@ It is what the paper's robot experiment needs (section VI): motion capture gives
 10 Hz, the node runs the exported policy once per control tick and publishes the command. Only
 ``numpy``, ``onnxruntime`` and ``pecli.runtime`` are needed on the robot besides ROS 2 itself::
 
-    pip install --no-deps pecli && pip install numpy onnxruntime
     pecli export onnx zoo/robots-run/pursuer/final.zip          # on the training machine
-    scp zoo/robots-run/pursuer/final.onnx* robot:               # the model and its .onnx.json
+    pip wheel --no-deps -w dist .                               # there too, in pecli's checkout
+    scp dist/pecli-*.whl zoo/robots-run/pursuer/final.onnx* robot:   # the wheel, the model and its .onnx.json
+    pip install --no-deps pecli-*.whl && pip install numpy onnxruntime   # on the robot
     python3 ros2_node.py --ros-args -p model:=final.onnx -p own_odom:=/f1tenth/odom \\
         -p opponent_odom:=/jetracer/odom -p drive:=/f1tenth/drive
 

@@ -1,7 +1,7 @@
 """The robot runtime: an exported policy on a robot, with NumPy and ONNX Runtime only.
 
 Nothing here imports torch, Stable-Baselines3 or the simulator, so a robot needs only ``numpy``
-and ``onnxruntime`` besides this package (``pip install --no-deps pecli`` works)::
+and ``onnxruntime`` besides this package (its wheel installed with ``--no-deps``; docs/export.md)::
 
     >>> from pecli.runtime import Controller
     >>> controller = Controller.load("final.onnx", seed=0)   # reads final.onnx.json beside it

@@ -261,3 +261,26 @@ def test_a_usage_error_is_one_line_from_the_shell() -> None:
     assert result.returncode == 2 and result.stdout == ""
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: Invalid value for 'role': 'pursuerr' is not one of")
+
+
+def test_an_internal_error_is_one_line_and_exit_code_3(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A bug is told apart from a refused input (1) and a usage error (2); PECLI_DEBUG shows its traceback."""
+    import typer
+
+    from pecli.cli.common import DEBUG_VARIABLE, INTERNAL_ERROR_EXIT, user_errors
+
+    broken = typer.Typer()
+
+    @broken.command()
+    @user_errors
+    def fails() -> None:
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.delenv(DEBUG_VARIABLE, raising=False)
+    result = runner.invoke(broken, [])
+    assert result.exit_code == INTERNAL_ERROR_EXIT == 3
+    assert result.output.strip().splitlines() == [
+        "internal error: ZeroDivisionError: a bug (set PECLI_DEBUG=1 to see the traceback, and please report it)"
+    ]
+    monkeypatch.setenv(DEBUG_VARIABLE, "1")
+    assert isinstance(runner.invoke(broken, []).exception, ZeroDivisionError)

@@ -1,7 +1,8 @@
 """What the reliability benchmark shares: running ``python -m pecli`` in a subprocess and judging its outcome.
 
-A bad input is *refused cleanly* when the command exits with code 1 and prints exactly one ``error:`` line and no
-traceback; an *internal error* is exit code 2, a traceback or any other crash; *accepted* means it exited 0.
+A bad input is *refused cleanly* when the command exits with code 1 (2: a usage error, the command line's) and prints
+exactly one ``error:`` line and no traceback; an *internal error* is exit code 3, a traceback or any other crash;
+*accepted* means it exited 0.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ def pecli(args: list[str], env: dict[str, str], timeout: float = 300) -> tuple[i
 
 def judge(part: str, case: str, code: int, output: str) -> Outcome:
     errors = [line for line in output.splitlines() if line.startswith(("error:", "internal error:"))]
-    if code == 1 and len(errors) == 1 and "Traceback" not in output and "internal error" not in output:
+    if code in (1, 2) and len(errors) == 1 and "Traceback" not in output and "internal error" not in output:
         verdict = "refused"
     elif code == 0:
         verdict = "accepted"

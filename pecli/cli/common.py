@@ -58,6 +58,7 @@ err_console = PlainConsole(stderr=True, width=_WIDTH)
 F = TypeVar("F", bound=Callable[..., Any])
 
 DEBUG_VARIABLE = "PECLI_DEBUG"
+INTERNAL_ERROR_EXIT = 3  # a bug; 1 is a refused input, 2 a usage error (the command-line parser's)
 
 BUILTIN_CONFIGS = "paper, tuned, league, quick, car_vs_car, point_mass, robots"
 PlayersConfigOption = Annotated[
@@ -85,7 +86,7 @@ SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Seed: the 
 def user_errors(command: F) -> F:
     """Turn a :class:`PecliError` or an ``OSError`` into one red line and exit code 1.
 
-    Anything else is a bug: one line and exit code 2, with the traceback only when
+    Anything else is a bug: one line and exit code 3 (:data:`INTERNAL_ERROR_EXIT`), with the traceback only when
     ``PECLI_DEBUG`` is set.
     """
 
@@ -113,7 +114,7 @@ def user_errors(command: F) -> F:
                 highlight=False,
                 soft_wrap=True,
             )
-            raise typer.Exit(code=2) from None
+            raise typer.Exit(code=INTERNAL_ERROR_EXIT) from None
 
     return wrapper  # type: ignore[return-value]
 

@@ -230,7 +230,8 @@ def average(
     """Write a checkpoint whose weights are the mean of CHECKPOINTS' (weight averaging over a run's last rounds).
 
     A self-play learner's policy moves from round to round; the mean of its last rounds' weights plays more
-    robustly than any one of them, at no training cost (docs/benchmarks.md). The result plays like any checkpoint.
+    robustly than any one of them, at no training cost (docs/benchmarks/strength.md). The result plays like any
+    checkpoint.
     """
     from pecli.rl.averaging import average_checkpoints
     from pecli.rl.selfplay import round_of

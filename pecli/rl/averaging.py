@@ -2,11 +2,11 @@
 2018, over self-play rounds).
 
 A self-play learner's checkpoints of consecutive rounds are points along one training trajectory, and its
-policy moves a lot from one round to the next against the players it does not train against (docs/benchmarks.md,
-"Averaging the last rounds"). The mean of the last rounds' weights plays more robustly than any one of them at
-no training cost. Only checkpoints of one network (same role, algorithm, belief, game and observation layout)
-average; the result is a checkpoint like any other: the newest input's file with its policy weights replaced by
-the mean, and metadata that names what was averaged.
+policy moves a lot from one round to the next against the players it does not train against
+(docs/benchmarks/strength.md, "Averaging the last rounds"). The mean of the last rounds' weights plays more
+robustly than any one of them at no training cost. Only checkpoints of one network (same role, algorithm,
+belief, game and observation layout) average; the result is a checkpoint like any other: the newest input's file
+with its policy weights replaced by the mean, and metadata that names what was averaged.
 """
 
 from __future__ import annotations

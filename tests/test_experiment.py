@@ -614,13 +614,13 @@ def test_handed_over_players_are_each_runs_averages(tmp_path: Path) -> None:
         handed_over(runs, tmp_path)
 
 
-def handed_over_tournament(tmp_path: Path, seeds: list[int]) -> tuple[Path, dict]:
+def handed_over_tournament(tmp_path: Path, seeds: list[int], kinds: tuple[str, ...] = ("none",)) -> tuple[Path, dict]:
     """An experiment folder of one league schedule whose handed-over players (and the paper's pure pursuit and
     greedy) played a tournament in which every pairing caught 7 of 10; and its ``kept.json``."""
     from pecli.io import atomic_write_json
     from pecli.tournament import PairingResult, Player, TournamentResults, rate
 
-    runs = {**SMOKE["runs"], "schedules": ["league"], "seeds": seeds}
+    runs = {**SMOKE["runs"], "schedules": ["league"], "seeds": seeds, "kinds": list(kinds)}
     data = {**SMOKE, "runs": runs, "ranking": {"players": "handed-over"}}
     experiment = experiment_from_dict(data, "exp.yaml")
     out = tmp_path / "out"
@@ -691,6 +691,25 @@ def test_a_groups_seeds_are_measured_as_one_mixed_pair(tmp_path: Path) -> None:
     assert (row["run"], row["group"], row["nash_conv"]) == ("none-league-mixed", "MADDPG", pytest.approx(0.7))
 
 
+def test_a_seeds_runs_of_every_kind_are_measured_as_one_population(tmp_path: Path) -> None:
+    from pecli.experiment.exploit import mixed_pairs, population_pairs, recorded_pairs
+    from pecli.experiment.report import ExperimentReport
+
+    out, _ = handed_over_tournament(tmp_path, [0, 1], kinds=("none", "bimdn"))
+    populations = population_pairs(out)
+    assert list(populations) == ["population-s0", "population-s1"]
+    pursuers, evaders = populations["population-s1"]
+    assert pursuers == "mix:zoo/none-league-s1/pursuer/average.zip,zoo/bimdn-league-s1/pursuer/average.zip"
+    assert evaders == "mix:zoo/none-league-s1/evader/average.zip,zoo/bimdn-league-s1/evader/average.zip"
+    assert list(mixed_pairs(out)) == ["none-league-mixed", "bimdn-league-mixed"]  # by kind, over seeds
+    measured(out / "exploit" / "population-s1", pursuers, evaders)
+    assert list(recorded_pairs(out)) == ["population-s1"]
+    (row,) = ExperimentReport(out).best_responses()
+    assert (row["run"], row["group"], row["nash_conv"]) == ("population-s1", "every kind", pytest.approx(0.7))
+    one_kind, _ = handed_over_tournament(tmp_path / "one", [0, 1])
+    assert population_pairs(one_kind) == {}  # a seed of one run is no population
+
+
 def test_only_the_groups_mixed_pairs_train_together_in_the_workers(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -713,6 +732,37 @@ def test_only_the_groups_mixed_pairs_train_together_in_the_workers(
     }
     with pytest.raises(PecliError, match="no pair to measure"):
         experiment_exploit.exploit_experiment(out, mixtures=False, runs=False)
+    with pytest.raises(PecliError, match="no pair to measure"):  # one kind: no seed holds a population
+        experiment_exploit.exploit_experiment(out, runs=False, populations=True)
+
+
+@pytest.mark.parametrize(
+    ("flags", "chosen"),
+    [
+        ([], (True, False, False)),
+        (["--mixtures"], (True, True, False)),
+        (["--only-mixtures"], (False, True, False)),
+        (["--populations"], (True, False, True)),
+        (["--populations", "--only-mixtures"], (False, False, True)),
+        (["--populations", "--mixtures", "--only-mixtures"], (False, True, True)),
+    ],
+)
+def test_experiment_exploit_flags_choose_runs_mixtures_and_populations(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flags: list[str], chosen: tuple[bool, bool, bool]
+) -> None:
+    import pecli.experiment.exploit as experiment_exploit
+    import pecli.experiment.report as experiment_report
+
+    asked = []
+    monkeypatch.setattr(
+        experiment_exploit,
+        "exploit_experiment",
+        lambda out, report, runs, mixtures, populations, **settings: asked.append((runs, mixtures, populations)),
+    )
+    monkeypatch.setattr(experiment_report, "write_report", lambda out: [])
+    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path), *flags])
+    assert result.exit_code == 0, result.output
+    assert asked == [chosen]
 
 
 def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> None:

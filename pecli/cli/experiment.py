@@ -322,6 +322,14 @@ def exploit(
         bool,
         typer.Option("--only-mixtures", help="Each group's mixed pair alone, not its runs one by one (the cheaper)."),
     ] = False,
+    populations: Annotated[
+        bool,
+        typer.Option(
+            "--populations",
+            help="Also each seed's runs of every kind as one pair of uniform mixtures, into "
+            "OUT/exploit/population-sSEED (with --only-mixtures and without --mixtures: those alone).",
+        ),
+    ] = False,
     workers: Annotated[
         int,
         typer.Option(
@@ -335,6 +343,8 @@ def exploit(
     [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. With [bold]--mixtures[/], then each group's seeds
     played as one mixed player (each game one seed's, drawn uniformly): a population is harder to exploit
     than any of its members; [bold]--only-mixtures[/] measures those alone, a third of the cost with three seeds.
+    [bold]--populations[/] mixes each seed's runs of every kind instead (the population one seed of the grid
+    trained, as diverse as the grid's kinds).
     [bold]--workers[/] trains that many responses at once; stopping is safe and the same command continues.
     """
     from pecli.experiment.exploit import exploit_experiment
@@ -353,8 +363,9 @@ def exploit(
             out,
             report,
             warm=warm,
-            mixtures=mixtures or only_mixtures,
+            mixtures=mixtures or (only_mixtures and not populations),
             runs=not only_mixtures,
+            populations=populations,
             workers=workers,
             **settings,
         )

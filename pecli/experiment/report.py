@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pecli.errors import PecliError
-from pecli.experiment.exploit import recorded_pairs
+from pecli.experiment.exploit import POPULATION, recorded_pairs
 from pecli.experiment.folder import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
@@ -345,7 +345,9 @@ class ExperimentReport:
             rows.append(
                 {
                     "run": run,
-                    "group": self.group_of_spec.get(first_member(pair.pursuer), ""),
+                    "group": "every kind"
+                    if run.startswith(POPULATION)
+                    else self.group_of_spec.get(first_member(pair.pursuer), ""),
                     "pair_capture_rate": pair.capture_rate,
                     "best_evader_holds_pursuer_to": best_evader.capture_rate,
                     "best_evader_interval": list(best_evader.interval),
@@ -371,7 +373,8 @@ class ExperimentReport:
             f"(`pecli experiment exploit`, {rows[0]['cpu_minutes']:g} CPU-minutes each); the strongest response "
             "counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): 0 for an "
             "equilibrium. 95 % intervals over the held-out games. A run named `…-mixed` is its group's seeds "
-            "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`).",
+            "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`), `population-sN` seed "
+            "N's runs of every kind (`--populations`).",
             "",
             "| run | group | the pair | best evader holds the pursuer to | best pursuer catches the evader | "
             "NashConv | responses |",

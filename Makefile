@@ -1,5 +1,6 @@
 # Two commands do all the set-up: `make demo` and `make test`.
-# Each creates .venv when it is missing, installs torch (CPU wheel) first, then pecli with its dev extra.
+# Each creates .venv when it is missing, installs torch (its CPU build, TORCH_INDEX below) first, then pecli with
+# its dev extra.
 # `make docs` adds the docs extra and builds the documentation site into site/ (a broken link fails it).
 PYTHON ?= python3
 VENV ?= .venv
@@ -7,7 +8,8 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.pecli-installed
 DOCS_STAMP := $(VENV)/.pecli-docs-installed
 # PyPI's Linux torch wheel is the CUDA build (several GB); this index holds the CPU one (torch==2.13.0+cpu), which pip
-# prefers as the higher version. Where it cannot be reached, torch comes from pip's own indexes.
+# prefers as the higher version. Where it cannot be reached (probed with urllib, which reads the environment's
+# proxy variables, not pip.conf), torch comes from pip's own indexes.
 # Empty it (make test TORCH_INDEX=) to use only pip's own configuration.
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 
@@ -17,12 +19,12 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 $(STAMP): $(PY) pyproject.toml
-	@echo "installing torch 2.13.0 (CPU wheel), then pecli and its dependencies into $(VENV): 2-3 minutes the first time"
+	@echo "installing torch 2.13.0 (the CPU build from TORCH_INDEX), then pecli and its dependencies into $(VENV): 2-3 minutes the first time"
 	@if [ -n "$(TORCH_INDEX)" ] && $(PY) -c "import sys, urllib.request; urllib.request.urlopen(sys.argv[1], timeout=10)" "$(TORCH_INDEX)" 2>/dev/null; then \
 		echo "$(PY) -m pip install --extra-index-url $(TORCH_INDEX) torch==2.13.0"; \
 		$(PY) -m pip install --progress-bar on --extra-index-url "$(TORCH_INDEX)" "torch==2.13.0"; \
 	else \
-		echo "$(PY) -m pip install torch==2.13.0 (from pip's own indexes: $(or $(TORCH_INDEX),no TORCH_INDEX) not reached)"; \
+		echo "$(PY) -m pip install torch==2.13.0 (from pip's own indexes, $(if $(TORCH_INDEX),$(TORCH_INDEX) not reached,TORCH_INDEX empty); on Linux PyPI's is the CUDA build)"; \
 		$(PY) -m pip install --progress-bar on "torch==2.13.0"; \
 	fi
 	@echo "torch installed; now pecli with its dev extra"

@@ -114,7 +114,7 @@ def solve_table(args: argparse.Namespace) -> None:
     if available():
         cases.append(("hj-reachability", "rel4d", (21, 11), 1))
     else:
-        print('hj-reachability is not installed (pip install "pecli[hj]"): its row is skipped', file=sys.stderr)
+        print('hj-reachability is not installed (pip install -e ".[hj]"): its row is skipped', file=sys.stderr)
     results = []
     for backend, model, sizes, repeats in cases:
         results.append(measure(args.config, model, sizes, steps, backend, repeats))

@@ -111,7 +111,7 @@ def run_demo(
 
     exported, export_capture = None, None
     if importlib.util.find_spec("onnx") is None or importlib.util.find_spec("onnxruntime") is None:
-        report("3/4 skipped: exporting needs onnx and onnxruntime (pip install 'pecli[export]')")
+        report("3/4 skipped: exporting needs onnx and onnxruntime (pip install onnx onnxruntime: pecli's export extra)")
     else:
         report("3/4 exporting to ONNX (parity-checked) and playing the export against greedy")
         exported = export_checkpoint(checkpoint).model

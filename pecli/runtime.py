@@ -162,9 +162,7 @@ class ExportedModel:
         try:
             import onnxruntime as ort
         except ImportError:
-            raise ExportError(
-                "exported models need onnxruntime: pip install onnxruntime (or 'pecli[export]')"
-            ) from None
+            raise ExportError("exported models need onnxruntime: pip install onnxruntime") from None
 
         check_graph(model, source)  # only an export's operators and sizes (with the onnx package)
         options = ort.SessionOptions()

@@ -283,4 +283,5 @@ def test_an_internal_error_is_one_line_and_exit_code_3(monkeypatch: pytest.Monke
         "internal error: ZeroDivisionError: a bug (set PECLI_DEBUG=1 to see the traceback, and please report it)"
     ]
     monkeypatch.setenv(DEBUG_VARIABLE, "1")
-    assert isinstance(runner.invoke(broken, []).exception, ZeroDivisionError)
+    debugged = runner.invoke(broken, [])
+    assert debugged.exit_code == 3 and "Traceback" in debugged.output and "ZeroDivisionError: a bug" in debugged.output

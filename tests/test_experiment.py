@@ -614,13 +614,15 @@ def test_handed_over_players_are_each_runs_averages(tmp_path: Path) -> None:
         handed_over(runs, tmp_path)
 
 
-def handed_over_tournament(tmp_path: Path, seeds: list[int], kinds: tuple[str, ...] = ("none",)) -> tuple[Path, dict]:
+def handed_over_tournament(
+    tmp_path: Path, seeds: list[int], kinds: tuple[str, ...] = ("none",), schedules: tuple[str, ...] = ("league",)
+) -> tuple[Path, dict]:
     """An experiment folder of one league schedule whose handed-over players (and the paper's pure pursuit and
     greedy) played a tournament in which every pairing caught 7 of 10; and its ``kept.json``."""
     from pecli.io import atomic_write_json
     from pecli.tournament import PairingResult, Player, TournamentResults, rate
 
-    runs = {**SMOKE["runs"], "schedules": ["league"], "seeds": seeds, "kinds": list(kinds)}
+    runs = {**SMOKE["runs"], "schedules": list(schedules), "seeds": seeds, "kinds": list(kinds)}
     data = {**SMOKE, "runs": runs, "ranking": {"players": "handed-over"}}
     experiment = experiment_from_dict(data, "exp.yaml")
     out = tmp_path / "out"
@@ -697,17 +699,17 @@ def test_a_seeds_runs_of_every_kind_are_measured_as_one_population(tmp_path: Pat
 
     out, _ = handed_over_tournament(tmp_path, [0, 1], kinds=("none", "bimdn"))
     populations = population_pairs(out)
-    assert list(populations) == ["population-s0", "population-s1"]
-    pursuers, evaders = populations["population-s1"]
+    assert list(populations) == ["population-league-s0", "population-league-s1"]
+    pursuers, evaders = populations["population-league-s1"]
     assert pursuers == "mix:zoo/none-league-s1/pursuer/average.zip,zoo/bimdn-league-s1/pursuer/average.zip"
     assert evaders == "mix:zoo/none-league-s1/evader/average.zip,zoo/bimdn-league-s1/evader/average.zip"
     assert list(mixed_pairs(out)) == ["none-league-mixed", "bimdn-league-mixed"]  # by kind, over seeds
-    measured(out / "exploit" / "population-s1", pursuers, evaders)
-    assert list(recorded_pairs(out)) == ["population-s1"]
+    measured(out / "exploit" / "population-league-s1", pursuers, evaders)
+    assert list(recorded_pairs(out)) == ["population-league-s1"]
     (row,) = ExperimentReport(out).best_responses()
-    assert (row["run"], row["group"], row["nash_conv"]) == ("population-s1", "every kind", pytest.approx(0.7))
-    one_kind, _ = handed_over_tournament(tmp_path / "one", [0, 1])
-    assert population_pairs(one_kind) == {}  # a seed of one run is no population
+    assert (row["run"], row["group"], row["nash_conv"]) == ("population-league-s1", "every kind", pytest.approx(0.7))
+    one_kind, _ = handed_over_tournament(tmp_path / "one", [0, 1], schedules=("league", "nash"))
+    assert population_pairs(one_kind) == {}  # one kind under each schedule is no population
 
 
 def test_only_the_groups_mixed_pairs_train_together_in_the_workers(

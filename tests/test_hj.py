@@ -173,7 +173,7 @@ def test_the_hj_reachability_backend_says_how_to_install_it(point_mass: Scenario
     monkeypatch.setitem(sys.modules, "hj_reachability", None)  # as if it were not installed
     problem = Problem.for_scenario(point_mass, "rel4d", (11, 5), steps=3, backend="hj-reachability")
     assert problem.key() != Problem.for_scenario(point_mass, "rel4d", (11, 5), steps=3).key()
-    with pytest.raises(PecliError, match='pip install "pecli\\[hj\\]"'):
+    with pytest.raises(PecliError, match="pip install 'hj-reachability>=0.7'"):
         solve_with_hj_reachability(problem)
     with pytest.raises(ConfigError, match="rel4d only"):
         Problem.for_scenario(point_mass, "rel6d", backend="hj-reachability")
@@ -602,7 +602,7 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
         (["hj", "table", "nothing.json"], "nothing.json"),
         (["hj", "list", "no-such-folder"], "no folder no-such-folder"),
         (["play", "-p", "hj", "-c", "point_mass"], "pecli hj solve"),
-        (["hj", "solve", "-g", "11,5", "--backend", "hj-reachability"], 'pip install "pecli[hj]"'),
+        (["hj", "solve", "-g", "11,5", "--backend", "hj-reachability"], "pip install 'hj-reachability>=0.7'"),
     ):
         monkeypatch.setitem(sys.modules, "hj_reachability", None)  # not installed, where it is
         result = runner.invoke(app, bad)

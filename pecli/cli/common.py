@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import os
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar
@@ -107,7 +108,8 @@ def user_errors(command: F) -> F:
             raise typer.Exit(code=1) from None
         except Exception as exc:
             if os.environ.get(DEBUG_VARIABLE):
-                raise
+                traceback.print_exc()
+                raise typer.Exit(code=INTERNAL_ERROR_EXIT) from None
             err_console.print(
                 f"[bold red]internal error:[/] {type(exc).__name__}: {escape(str(exc))} "
                 f"(set {DEBUG_VARIABLE}=1 to see the traceback, and please report it)",

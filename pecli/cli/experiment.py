@@ -320,14 +320,18 @@ def exploit(
     ] = False,
     only_mixtures: Annotated[
         bool,
-        typer.Option("--only-mixtures", help="Each group's mixed pair alone, not its runs one by one (the cheaper)."),
+        typer.Option(
+            "--only-mixtures",
+            help="No run one by one: each group's mixed pair alone (the cheaper), or with --populations the "
+            "populations alone (add --mixtures for both).",
+        ),
     ] = False,
     populations: Annotated[
         bool,
         typer.Option(
             "--populations",
-            help="Also each seed's runs of every kind as one pair of uniform mixtures, into "
-            "OUT/exploit/population-sSEED (with --only-mixtures and without --mixtures: those alone).",
+            help="Also each seed's runs of every kind (under one schedule) as one pair of uniform mixtures, into "
+            "OUT/exploit/population-<schedule>-s<seed>.",
         ),
     ] = False,
     workers: Annotated[
@@ -341,10 +345,10 @@ def exploit(
 
     For each run: evaders trained on its pursuer alone and pursuers trained on its evader alone (as
     [bold]pecli exploit --pair[/]), into OUT/exploit/RUN. With [bold]--mixtures[/], then each group's seeds
-    played as one mixed player (each game one seed's, drawn uniformly): a population is harder to exploit
-    than any of its members; [bold]--only-mixtures[/] measures those alone, a third of the cost with three seeds.
-    [bold]--populations[/] mixes each seed's runs of every kind instead (the population one seed of the grid
-    trained, as diverse as the grid's kinds).
+    played as one mixed player (each game one seed's, drawn uniformly): a mixture is harder to exploit than
+    any of its members; [bold]--only-mixtures[/] measures those alone, a third of the cost with three seeds.
+    [bold]--populations[/] also mixes each seed's runs of every kind (the population one seed of the grid
+    trained, as diverse as the grid's kinds); with [bold]--only-mixtures[/], those alone.
     [bold]--workers[/] trains that many responses at once; stopping is safe and the same command continues.
     """
     from pecli.experiment.exploit import exploit_experiment

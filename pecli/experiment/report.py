@@ -373,8 +373,8 @@ class ExperimentReport:
             f"(`pecli experiment exploit`, {rows[0]['cpu_minutes']:g} CPU-minutes each); the strongest response "
             "counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): 0 for an "
             "equilibrium. 95 % intervals over the held-out games. A run named `…-mixed` is its group's seeds "
-            "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`), `population-sN` seed "
-            "N's runs of every kind (`--populations`).",
+            "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`), `population-SCHEDULE-sN` "
+            "seed N's runs of every kind (`--populations`).",
             "",
             "| run | group | the pair | best evader holds the pursuer to | best pursuer catches the evader | "
             "NashConv | responses |",

@@ -74,7 +74,9 @@ def checked_onnx(graph: PolicyGraph, example: dict[str, th.Tensor], opset: int, 
     try:
         import onnx
     except ImportError:
-        raise ExportError("pecli export needs onnx and onnxruntime: pip install 'pecli[export]'") from None
+        raise ExportError(
+            "pecli export needs onnx and onnxruntime: pip install onnx onnxruntime (pecli's export extra)"
+        ) from None
 
     try:
         data = to_onnx(graph, example, opset)

@@ -9,7 +9,8 @@ Its value is the continuous-time closed form's counterpart, so compare it with
 :func:`pecli.hj.oracle.continuous_value`. The order (``maxmin``/``minmax``) does not matter in
 continuous time: the dynamics separate the inputs, so the two orders agree (Isaacs' condition).
 
-Install with ``pip install "pecli[hj]"``; only ``rel4d`` is offered.
+Install it with pecli's ``hj`` extra (``pip install -e ".[hj]"`` in the checkout, or ``pip install
+"hj-reachability>=0.7"``); only ``rel4d`` is offered.
 """
 
 from __future__ import annotations
@@ -37,7 +38,9 @@ def solve_with_hj_reachability(problem: Problem, accuracy: str = "very_high") ->
         import hj_reachability as hj
         import jax.numpy as jnp
     except ImportError:
-        raise PecliError('hj-reachability is not installed: pip install "pecli[hj]"') from None
+        raise PecliError(
+            "hj-reachability is not installed: pip install 'hj-reachability>=0.7' (pecli's hj extra)"
+        ) from None
 
     game, grid = problem.game, problem.grid
 

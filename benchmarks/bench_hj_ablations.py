@@ -42,6 +42,8 @@ EPISODES = 500
 class RatesEstimates(HJPolicy):
     """The outcome rule also where the opponent is unseen: the estimate rated as if it were the state."""
 
+    name = "hj-rates-estimates"
+
     def _act(self, view):
         opp_pos, opp_vel = self._estimate(view)
         own = np.concatenate([view.own_pos, view.own_vel], axis=1).T
@@ -54,6 +56,8 @@ class RatesEstimates(HJPolicy):
 
 class KeepsEstimates(HJPolicy):
     """An estimate within the player's own sensing range stays where it is."""
+
+    name = "hj-keeps-estimates"
 
     def _out_of_sight(self, view, estimate):
         return estimate
@@ -127,6 +131,8 @@ def causes(args: argparse.Namespace) -> None:
 
 class Rating(HJPolicy):
     """The ``hj`` evader with another rating of its inputs over the pursuer's nine (``scores`` axis 1)."""
+
+    name = "hj-rating"
 
     def __init__(self, scenario: Scenario, solution: Solution, rate: Callable[[np.ndarray], np.ndarray]) -> None:
         super().__init__(scenario, "evader", solution)

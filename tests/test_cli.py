@@ -34,6 +34,33 @@ def test_help_lists_grouped_commands() -> None:
         assert text in result.stdout
 
 
+def _options(command, path: tuple[str, ...] = ()):
+    """(command path, long names, short names) of every option of every command under ``command``."""
+    if hasattr(command, "list_commands"):
+        for name in command.list_commands(None):
+            yield from _options(command.get_command(None, name), (*path, name))
+        return
+    for param in command.params:
+        if param.param_type_name == "option":
+            names = [*param.opts, *param.secondary_opts]
+            yield " ".join(path), [n for n in names if n.startswith("--")], [n for n in names if not n.startswith("--")]
+
+
+def test_a_short_flag_means_one_option_in_every_command() -> None:
+    import typer
+
+    shorts: dict[str, set[str]] = {}
+    longs: dict[str, set[tuple[str, ...]]] = {}
+    for _, long_names, short_names in _options(typer.main.get_command(app)):
+        for short in short_names:
+            shorts.setdefault(short, set()).update(long_names)
+        for long in long_names:
+            longs.setdefault(long, set()).add(tuple(short_names))
+    assert {s: ls for s, ls in shorts.items() if len(ls) > 1} == {}
+    assert {ln: ss for ln, ss in longs.items() if len(ss) > 1} == {}
+    assert shorts["-o"] == {"--out"} and shorts["-n"] == {"--episodes"}
+
+
 def test_play_help_names_every_builtin_player_of_each_side() -> None:
     shown = runner.invoke(app, ["play", "--help"], env={"COLUMNS": "400"}).stdout
     pursuer, evader = (line for line in shown.splitlines() if "A built-in name" in line)

@@ -596,7 +596,6 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
     for bad, message in (
         (["hj", "solve", "-c", "paper"], "point mass vs point mass"),
         (["hj", "solve", "-g", "abc"], "--grid takes two whole numbers"),
-        (["hj", "solve", "--model", "rel5d"], "unknown HJ model"),
         (["hj", "solve", "-o", "out.txt"], "--out must end in .npz"),
         (["hj", "show", "nothing.npz"], "no HJ solution at"),
         (["hj", "table", "nothing.json"], "nothing.json"),
@@ -608,6 +607,18 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
         result = runner.invoke(app, bad)
         assert result.exit_code == 1, (bad, result.output)
         assert message in result.output and "Traceback" not in result.output
+    for bad in (["--model", "rel5d"], ["--order", "max"], ["--backend", "jax"]):  # usage errors: the choices
+        result = runner.invoke(app, ["hj", "solve", *bad])
+        assert result.exit_code == 2 and bad[0] in result.output and "Traceback" not in result.output
+
+
+def test_the_cli_choices_are_the_solver_s() -> None:
+    from pecli.cli.hj import HJBackend, HJModel, HJOrder
+    from pecli.hj.grid import MODELS
+    from pecli.hj.problem import BACKENDS, ORDERS
+
+    for choice, known in ((HJModel, MODELS), (HJOrder, ORDERS), (HJBackend, BACKENDS)):
+        assert sorted(c.value for c in choice) == sorted(known)
 
 
 def test_requested_sizes_that_snap_to_one_grid_share_a_cache_key(point_mass: Scenario) -> None:

@@ -308,7 +308,7 @@ def test_a_trial_whose_process_is_gone_is_failed_and_queued_again_at_once(tmp_pa
 def test_tune_selfplay_offers_no_frozen_opponent_and_a_bad_count_is_named(tmp_path: Path) -> None:
     assert "--opponent" not in runner.invoke(app, ["tune", "selfplay", "--help"]).output
     assert "--opponent" in runner.invoke(app, ["tune", "pursuer", "--help"]).output
-    refused = runner.invoke(app, ["tune", "selfplay", "-c", "quick", "-o", "greedy", "--dir", str(tmp_path)])
+    refused = runner.invoke(app, ["tune", "selfplay", "-c", "quick", "--opponent", "greedy", "--dir", str(tmp_path)])
     assert refused.exit_code == 2 and "No such option" in refused.output
     jobs = runner.invoke(app, ["tune", "pursuer", "-c", "quick", "--jobs", "0", "--dir", str(tmp_path)])
     assert jobs.exit_code == 1 and "--jobs must be at least 1, not 0" in jobs.output, jobs.output

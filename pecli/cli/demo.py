@@ -14,7 +14,7 @@ from pecli.cli.common import console, err_console, sigterm_stops, user_errors
 
 @user_errors
 def demo(
-    out: Annotated[Path, typer.Option("--out", help="Where the run and the pictures go.")] = Path("runs/demo"),
+    out: Annotated[Path, typer.Option("--out", "-o", help="Where the run and the pictures go.")] = Path("runs/demo"),
     cpu_minutes: Annotated[
         float, typer.Option("--cpu-minutes", help="Training's CPU budget.", min=0.1, max=600.0)
     ] = 1.5,

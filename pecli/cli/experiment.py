@@ -138,7 +138,9 @@ def run(
     out: Annotated[
         Path | None,
         typer.Option(
-            "--out", help="The experiment's folder (default: runs/experiments/<name>); run again on it to continue."
+            "--out",
+            "-o",
+            help="The experiment's folder (default: runs/experiments/<name>); run again on it to continue.",
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No live table.")] = False,
@@ -413,8 +415,8 @@ def compare(
             show_default=False,
         ),
     ] = None,
-    out: Annotated[Path, typer.Option("--out", help="Where the games are cached.")] = Path("runs/compare"),
-    workers: Annotated[int, typer.Option("--workers", min=1, help="Processes that play the pairings.")] = 2,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Where the games are cached.")] = Path("runs/compare"),
+    workers: Annotated[int, typer.Option("--workers", "-w", min=1, help="Processes that play the pairings.")] = 2,
 ) -> None:
     """An A/B of zoos of the same self-play runs at an equal budget.
 

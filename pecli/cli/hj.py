@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,29 @@ app = typer.Typer(
     no_args_is_help=True,
 )
 
+
+class HJModel(str, Enum):
+    """The state space of the solved game (pecli.hj.grid.MODELS)."""
+
+    abs8d = "abs8d"
+    rel4d = "rel4d"
+    rel6d = "rel6d"
+
+
+class HJOrder(str, Enum):
+    """Who answers whom within a step (pecli.hj.problem.ORDERS)."""
+
+    maxmin = "maxmin"
+    minmax = "minmax"
+
+
+class HJBackend(str, Enum):
+    """The solver (pecli.hj.problem.BACKENDS)."""
+
+    numpy = "numpy"
+    hj_reachability = "hj-reachability"
+
+
 HJ_CONFIG_HELP = "Scenario with two point masses: a YAML file or a built-in name (point_mass)."
 GridOption = Annotated[
     str | None,
@@ -31,7 +55,7 @@ GridOption = Annotated[
     ),
 ]
 ModelOption = Annotated[
-    str | None,
+    HJModel | None,
     typer.Option(
         "--model",
         "-m",
@@ -40,20 +64,32 @@ ModelOption = Annotated[
     ),
 ]
 OrderOption = Annotated[
-    str, typer.Option("--order", help="maxmin (the pursuer answers the evader's input) or minmax (the evader answers).")
+    HJOrder,
+    typer.Option("--order", help="maxmin (the pursuer answers the evader's input) or minmax (the evader answers)."),
 ]
 
 
-def _problem(config: str, model: str | None, grid: str | None, order: str, steps: int | None, backend: str):
+def _problem(
+    config: str, model: HJModel | None, grid: str | None, order: HJOrder, steps: int | None, backend: HJBackend
+):
     from pecli.hj.grid import DEFAULT_MODEL, parse_sizes
     from pecli.hj.problem import Problem
     from pecli.scenario import load_scenario
 
     if model is None:  # hj-reachability solves rel4d only
-        model = "rel4d" if backend == "hj-reachability" else DEFAULT_MODEL
+        name = "rel4d" if backend is HJBackend.hj_reachability else DEFAULT_MODEL
+    else:
+        name = model.value
     scenario = load_scenario(config)
     sizes = parse_sizes(grid) if grid is not None else None
-    return scenario, Problem.for_scenario(scenario, model, sizes, order, steps, backend)  # type: ignore[arg-type]
+    return scenario, Problem.for_scenario(
+        scenario,
+        name,
+        sizes,
+        order.value,
+        steps,
+        backend.value,  # type: ignore[arg-type]
+    )
 
 
 @app.command("solve")
@@ -62,7 +98,7 @@ def solve(
     config: Annotated[str, typer.Option("--config", "-c", help=HJ_CONFIG_HELP)] = "point_mass",
     model: ModelOption = None,
     grid: GridOption = None,
-    order: OrderOption = "maxmin",
+    order: OrderOption = HJOrder.maxmin,
     steps: Annotated[
         int | None, typer.Option("--steps", help="Horizon in game steps (default: the scenario's T).")
     ] = None,
@@ -73,13 +109,13 @@ def solve(
         bool, typer.Option("--force", help="Solve again even if a solution with the same key exists.")
     ] = False,
     backend: Annotated[
-        str,
+        HJBackend,
         typer.Option(
             "--backend",
             help="numpy (the game's discrete time) or hj-reachability (JAX, continuous "
-            'time, rel4d; pip install "pecli\\[hj]").',
+            'time, rel4d; pip install "hj-reachability>=0.7").',
         ),
-    ] = "numpy",
+    ] = HJBackend.numpy,
     as_json: Annotated[bool, typer.Option("--json", help="Print the solution's summary as JSON.")] = False,
 ) -> None:
     """Solve the point mass vs point mass game on a grid and keep the value function.
@@ -145,12 +181,12 @@ def show(
     from pecli.scenario import load_scenario
 
     if solution is None:
-        model = model or DEFAULT_MODEL
-        solution = cache_path(Problem.for_scenario(load_scenario(config), model))  # type: ignore[arg-type]
+        name = DEFAULT_MODEL if model is None else model.value
+        solution = cache_path(Problem.for_scenario(load_scenario(config), name))  # type: ignore[arg-type]
         if not solution.is_file():
-            flag = "" if model == DEFAULT_MODEL else f" --model {model}"
+            flag = "" if name == DEFAULT_MODEL else f" --model {name}"
             raise PecliError(
-                f"no cached {model} solution for {config}: run `pecli hj solve --config {config}{flag}` first"
+                f"no cached {name} solution for {config}: run `pecli hj solve --config {config}{flag}` first"
             )
     console.print_json(json.dumps({**Solution.load(solution).summary(), "path": str(solution)}))
 

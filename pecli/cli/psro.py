@@ -91,7 +91,9 @@ def psro(
     workers: Annotated[
         int, typer.Option("--workers", "-w", help="Processes playing the meta-game and training the best responses.")
     ] = 1,
-    out: Annotated[Path, typer.Option("--out", help="The PSRO folder (a re-run continues it).")] = Path("runs/psro"),
+    out: Annotated[Path, typer.Option("--out", "-o", help="The PSRO folder (a re-run continues it).")] = Path(
+        "runs/psro"
+    ),
     as_json: Annotated[bool, typer.Option("--json", help="Print the iterations as JSON.")] = False,
 ) -> None:
     """PSRO from PURSUER and EVADER: grow both populations with trained best responses until their mixtures

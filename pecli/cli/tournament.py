@@ -57,6 +57,7 @@ def tournament(
         Path | None,
         typer.Option(
             "--out",
+            "-o",
             help="Folder for results, reports and the pairing cache "
             "(default: <first folder>/tournament, else runs/tournament).",
         ),

@@ -45,7 +45,6 @@ def train(
         str | None,
         typer.Option(
             "--opponent",
-            "-o",
             help="The frozen opponent: a built-in, a checkpoint, or module:Class. "
             "Default: greedy for a pursuer, pure-pursuit for an evader.",
         ),

@@ -196,7 +196,6 @@ def _command(what: str, doc: str) -> Any:
             str | None,
             typer.Option(
                 "--opponent",
-                "-o",
                 help="The frozen opponent (default: greedy for a pursuer, pure-pursuit for an evader).",
             ),
         ] = None,
@@ -211,7 +210,7 @@ def _command(what: str, doc: str) -> Any:
             int | None,
             typer.Option(
                 "--trials",
-                "-n",
+                "-t",
                 help="Trials the study has when done (complete or pruned; default 30, a resumed study its own).",
             ),
         ] = None,
@@ -328,7 +327,7 @@ def report(
     study_name: Annotated[str, typer.Argument(help="The study.", metavar="STUDY")],
     storage: StorageOption = None,
     folder: DirOption = DEFAULT_DIR,
-    out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: <dir>/<study>).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Report folder (default: <dir>/<study>).")] = None,
     profile: Annotated[
         Path | None,
         typer.Option("--profile", help="Also write the best trial's settings as a scenario YAML (a training profile)."),

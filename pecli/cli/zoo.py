@@ -222,6 +222,7 @@ def average(
         Path | None,
         typer.Option(
             "--out",
+            "-o",
             help="The checkpoint to write (default, with a folder: "
             "FOLDER/average-A-B.zip, A and B its first and last round).",
         ),

@@ -105,6 +105,12 @@ class HJPolicy(HeuristicPolicy):
 
     Attributes:
         identity: what decides its play (the solution's key and the belief's id), for caches of results.
+
+    Variants (the benchmarks' ablations) subclass it and override its steps, as Stable-Baselines3's
+    callbacks override ``_on_step``: :meth:`_act` (the whole decision), :meth:`_estimate` (where the unseen
+    opponent is), :meth:`_out_of_sight` (what the player's own sensor rules out) and :meth:`_evader_choice`
+    (how the evader rates outcomes). A variant gives itself another class ``name``: it begins its
+    :attr:`identity`, so that results cached for the built-in rules are not taken for the variant's.
     """
 
     name = "hj"
@@ -134,7 +140,8 @@ class HJPolicy(HeuristicPolicy):
         self.dynamics = {r: PointMassDynamics(scenario.agent(r)) for r in ("pursuer", "evader")}  # type: ignore[arg-type]
         self.opponent = self.dynamics[opponent_of(role)]
         self.half = np.array(scenario.arena.half)
-        self.identity = f"hj:{solution.key}:rules{RULES}" + (f":belief:{belief_id}" if belief is not None else "")
+        belief_part = f":belief:{belief_id}" if belief is not None else ""
+        self.identity = f"{self.name}:{solution.key}:rules{RULES}{belief_part}"
 
     # ------------------------------------------------------------------ memory
     def _allocate(self, n: int) -> None:

@@ -8,11 +8,12 @@
 ``train`` trains both roles of the ``paper`` game with each peer library (``benchmarks/peers/``) until the CPU
 time of the training process and its children reaches ``--cpu-hours``, then exports each role's deterministic
 actor with :func:`pecli.export.network.export_network` to ``<zoo>/<peer>-s<seed>/{pursuer,evader}.onnx``; a
-run whose exports exist is skipped. ``match`` plays one tournament (cached in ``<zoo>/tournament``) of pecli's
-handed-over players (``<run>/<role>/average.zip``, one run per seed, paired with the peers' runs of the same seed
-by order), the peers' players, the scripted players and the adversarial evaders, and prints the swap targets:
-pecli's pursuer against a peer's evader beside the peer's own pursuer, and pecli's evader against a peer's
-pursuer beside the peer's own evader.
+run whose exports exist is skipped, and a run stopped midway continues from its last checkpoint (saved every
+5 CPU-minutes), its budget counting the CPU spent before. ``match`` plays one tournament (cached in
+``<zoo>/tournament``) of pecli's handed-over players (``<run>/<role>/average.zip``, one run per seed, paired
+with the peers' runs of the same seed by order), the peers' players, the scripted players and the adversarial
+evaders, and prints the swap targets: pecli's pursuer against a peer's evader beside the peer's own pursuer, and
+pecli's evader against a peer's pursuer beside the peer's own evader.
 
 Needs the ``peers`` extra (``pip install -e ".[peers]"``); a library that is missing is skipped. Each figure is
 env-steps per CPU-second (``time.process_time`` of this process, one torch thread), the median of ``--repeats``

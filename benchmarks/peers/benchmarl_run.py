@@ -6,6 +6,10 @@ deterministic actor as a plain torch module (observation ``(B, 11)`` -> action `
 The algorithm and experiment start from BenchMARL's own defaults (``get_from_yaml()``: its
 ``benchmarl/conf/algorithm/*.yaml`` and ``conf/experiment/base_experiment.yaml``); ``experiment_config`` changes
 only what one non-vectorised env on a shared CPU needs, and each change is recorded with its reason.
+
+Every ``SAVE_EVERY`` CPU-seconds the experiment's state (``Experiment.state_dict``: the losses, the replay buffers,
+the collector) is saved with the run's progress to ``<experiment folder>/checkpoints/resume.pt``; a run stopped
+midway continues from there through BenchMARL's own ``restore_file``, its budget counting what was spent before.
 """
 
 from __future__ import annotations
@@ -42,6 +46,8 @@ RECORD = "benchmarl.json"
 TOLERANCE = 1e-5  # the pure actor against BenchMARL's policy, max abs difference of the actions
 MEMORY_FRAMES = 1_000_000
 NEVER = 10**12  # frames: the CPU budget ends the run, not BenchMARL's frame or iteration count
+RESUME = "resume.pt"  # in the experiment folder's checkpoints/: where a stopped run continues from
+SAVE_EVERY = 300.0  # CPU seconds between checkpoints
 
 # What one non-vectorised env on a shared CPU changes in base_experiment.yaml, and why.
 CHANGES: dict[str, tuple[Any, str]] = {
@@ -70,7 +76,7 @@ CHANGES: dict[str, tuple[Any, str]] = {
     "render": (False, "nothing to render"),
     "loggers": (["csv"], "BenchMARL's own csv log under out; no wandb"),
     "create_json": (False, "marl-eval json is written by evaluation, which is off"),
-    "checkpoint_interval": (0, "no checkpoints: the actors are returned"),
+    "checkpoint_interval": (0, "BenchMARL's own checkpoints off: the run saves one every SAVE_EVERY CPU-seconds"),
 }
 
 
@@ -92,12 +98,15 @@ def cpu_now() -> float:
 
 
 class Progress(Callback):
-    """Counts each iteration's frames and episodes, logs a line, and stops the run when the budget is spent."""
+    """Counts each iteration's frames and episodes, logs a line, saves the experiment every ``SAVE_EVERY``
+    CPU-seconds and stops the run when the budget is spent."""
 
     def __init__(self, budget: float, log: Callable[[str], None], save: Callable[[], None]) -> None:
         super().__init__()
         self.budget, self.log, self.save = budget, log, save
         self.start = cpu_now()
+        self.spent_before = 0.0  # CPU seconds of the sittings before this one (a continued run)
+        self.last_checkpoint = 0.0
         self.curve: list[dict[str, Any]] = []
         self.episodes = 0
         self.batch: dict[str, Any] = {}
@@ -107,7 +116,25 @@ class Progress(Callback):
         return {**self.__dict__, "experiment": None, "log": None, "save": None}
 
     def used(self) -> float:
-        return cpu_now() - self.start
+        return self.spent_before + cpu_now() - self.start
+
+    def on_state_dict(self, state_dict: dict[str, Any]) -> None:
+        state_dict["pecli_progress"] = {"cpu_seconds": self.used(), "curve": self.curve, "episodes": self.episodes}
+
+    def on_load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        saved = state_dict["pecli_progress"]
+        self.spent_before = self.last_checkpoint = float(saved["cpu_seconds"])
+        self.curve[:] = saved["curve"]  # in place: the record holds this list
+        self.episodes = int(saved["episodes"])
+
+    def checkpoint(self) -> None:
+        """The experiment's state and this run's progress, written atomically to ``checkpoints/resume.pt``."""
+        folder = Path(self.experiment.folder_name) / "checkpoints"
+        folder.mkdir(exist_ok=True)
+        tmp = folder / f"{RESUME}.tmp"
+        torch.save(self.experiment.state_dict(), tmp)
+        os.replace(tmp, folder / RESUME)
+        self.last_checkpoint = self.used()
 
     def on_batch_collected(self, batch: TensorDictBase) -> None:
         groups = list(self.experiment.group_map)
@@ -135,6 +162,8 @@ class Progress(Callback):
         self.save()
         if point["cpu_seconds"] >= self.budget:
             raise BudgetSpent
+        if point["cpu_seconds"] - self.last_checkpoint >= SAVE_EVERY:
+            self.checkpoint()
 
 
 def line(point: dict[str, Any], budget: float) -> str:
@@ -148,11 +177,13 @@ def line(point: dict[str, Any], budget: float) -> str:
 
 
 def experiment_config(out: Path) -> ExperimentConfig:
-    """BenchMARL's default experiment with :data:`CHANGES` applied, logging under ``out``."""
+    """BenchMARL's default experiment with :data:`CHANGES` applied, logging under ``out``; restoring a stopped
+    run's checkpoint there, if it has one."""
     config = ExperimentConfig.get_from_yaml()
     for key, (value, _) in CHANGES.items():
         setattr(config, key, value)
     config.save_folder = str(out)
+    config.restore_file = next((str(path) for path in out.glob(f"*/checkpoints/{RESUME}")), None)
     return config
 
 
@@ -178,7 +209,9 @@ def settings(algorithm: str, config: ExperimentConfig, algorithm_config: Algorit
         "algorithm_config_source": f"{base}/algorithm/{algorithm}.yaml (unchanged)",
         "model_config": jsonable(asdict(model)),
         "model_config_source": f"{base}/model/layers/mlp.yaml (unchanged; the critic's too)",
-        "experiment_config": jsonable({key: value for key, value in vars(config).items() if key != "save_folder"}),
+        "experiment_config": jsonable(
+            {key: value for key, value in vars(config).items() if key not in ("save_folder", "restore_file")}
+        ),
         "experiment_config_source": f"{base}/experiment/base_experiment.yaml, with experiment_changes",
         "experiment_changes": {key: {"value": jsonable(value), "why": why} for key, (value, why) in CHANGES.items()},
         "fine_tuned_reference": "https://github.com/facebookresearch/BenchMARL/blob/main/fine_tuned/vmas/conf/config.yaml",
@@ -274,8 +307,9 @@ def train(
     log: Callable[[str], None] = print,
     algorithm: str = "masac",
 ) -> PeerRun:
-    """Train both roles of ``scenario`` with BenchMARL until this process's CPU time since the call (children
-    included) reaches ``cpu_seconds``, checked after each iteration; write ``out/benchmarl.json``."""
+    """Train both roles of ``scenario`` with BenchMARL until this process's CPU time (children included, and the
+    earlier sittings' of a continued run) reaches ``cpu_seconds``, checked after each iteration; write
+    ``out/benchmarl.json``."""
     if algorithm not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algorithm!r}: one of {sorted(ALGORITHMS)}")
     torch.set_num_threads(1)
@@ -303,6 +337,8 @@ def train(
             config=config,
             callbacks=[progress],
         )
+        if config.restore_file is not None:
+            log(f"continuing from {config.restore_file} ({progress.used():.0f} CPU s spent)")
         try:
             experiment.run()
         except BudgetSpent:
@@ -314,6 +350,7 @@ def train(
     record.fields |= {"iterations": len(progress.curve), "cpu_seconds": used, "actor_check_max_abs": differences}
     record.fields["experiment_folder"] = str(experiment.folder_name)
     record.save()
+    (Path(experiment.folder_name) / "checkpoints" / RESUME).unlink(missing_ok=True)  # finished: the actors remain
     return PeerRun(
         actors=actors,
         steps=experiment.total_frames,

@@ -7,7 +7,9 @@ The env is ``parallel_env(scenario)`` in RLlib's ``ParallelPettingZooEnv``, as d
 PPO runs on the new API stack with one RLModule per agent (``pursuer`` and ``evader``, simultaneous self-play).
 Sampling and learning run in this process (no env-runner or learner actors), torch on one thread. The budget is
 the CPU time of this process and of every process below it (Ray's GCS, raylet and workers), read after each
-``algo.train()`` iteration.
+``algo.train()`` iteration. Every ``SAVE_EVERY`` CPU-seconds the algorithm is saved (``algo.save_to_path``) into
+``out/checkpoint`` with the CPU spent and the curve so far; a run stopped midway continues from there
+(``algo.restore_from_path``), its budget counting what the earlier sittings spent.
 
 The settings are RLlib's own tuned continuous-control PPO (``rllib/examples/algorithms/ppo/mujoco_ppo.py``) with
 one change for the game's reward scale: the learner multiplies rewards by 1/1000 before GAE, as pecli's own
@@ -20,6 +22,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import shutil
 import time
 from collections.abc import Callable
 from importlib.metadata import version
@@ -67,6 +70,9 @@ MODEL: dict[str, Any] = {
 REWARD_SCALE = 0.001  # rewards / 1000 for learning, as configs/paper.yaml's training.reward_scale
 RAY_INIT: dict[str, Any] = {"num_cpus": 1, "include_dashboard": False}
 CHECK_TOLERANCE = 1e-5
+CHECKPOINT = "checkpoint"  # algo.save_to_path's folder, with RESUME: where a stopped run continues from
+RESUME = "resume.json"  # the CPU spent and the curve when the checkpoint was saved
+SAVE_EVERY = 300.0  # CPU seconds between checkpoints
 
 
 class DeterministicActor(nn.Module):
@@ -257,18 +263,52 @@ def write_record(out: Path, record: dict[str, Any]) -> None:
     os.replace(tmp, target)
 
 
-def train_loop(algo: Any, budget: float, start: float, log: Callable[[str], None]) -> list[dict[str, Any]]:
-    """``algo.train()`` until the CPU of this process tree since ``start`` reaches ``budget``."""
-    curve: list[dict[str, Any]] = []
+def save(algo: Any, out: Path, curve: list[dict[str, Any]], spent: float) -> None:
+    """The algorithm and the run so far into ``out/checkpoint``, replacing the last one only once complete."""
+    target, tmp, old = out / CHECKPOINT, out / f"{CHECKPOINT}.tmp", out / f"{CHECKPOINT}.old"
+    shutil.rmtree(tmp, ignore_errors=True)
+    algo.save_to_path(str(tmp.resolve()))
+    (tmp / RESUME).write_text(json.dumps({"cpu_s": spent, "curve": curve}) + "\n")
+    shutil.rmtree(old, ignore_errors=True)
+    if target.exists():
+        os.replace(target, old)
+    os.replace(tmp, target)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def saved(out: Path) -> Path | None:
+    """The newest complete checkpoint of a stopped run (the previous one if a save stopped between its renames)."""
+    for name in (CHECKPOINT, f"{CHECKPOINT}.old"):
+        if (out / name / RESUME).is_file():
+            return out / name
+    return None
+
+
+def train_loop(
+    algo: Any,
+    budget: float,
+    start: float,
+    log: Callable[[str], None],
+    out: Path,
+    spent: float = 0.0,
+    curve: list[dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:
+    """``algo.train()`` until ``spent`` (earlier sittings) and the CPU of this process tree since ``start`` reach
+    ``budget``, saving a checkpoint every ``SAVE_EVERY`` CPU-seconds."""
+    curve = [] if curve is None else curve
+    last_save = spent
     while True:
         result = algo.train()
         own, others = tree_cpu()
-        point = curve_point(result, own + others - start)
+        point = curve_point(result, spent + own + others - start)
         point["ray_cpu_s"] = round(others, 2)
         curve.append(point)
         log(progress(point, budget))
         if point["cpu_s"] >= budget:
             return curve
+        if point["cpu_s"] - last_save >= SAVE_EVERY:
+            save(algo, out, curve, point["cpu_s"])
+            last_save = point["cpu_s"]
 
 
 def finish(algo: Any, scenario: str, seed: int, curve: list[dict[str, Any]], wall: float) -> PeerRun:
@@ -294,17 +334,25 @@ def finish(algo: Any, scenario: str, seed: int, curve: list[dict[str, Any]], wal
 
 
 def train(scenario: str, cpu_seconds: float, seed: int, out: Path, log: Callable[[str], None] = print) -> PeerRun:
-    """Train both roles with RLlib's multi-agent PPO for ``cpu_seconds`` of CPU; write ``out/rllib.json``."""
+    """Train both roles with RLlib's multi-agent PPO for ``cpu_seconds`` of CPU (continuing a stopped run from its
+    checkpoint in ``out``); write ``out/rllib.json``."""
     import ray
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     torch.set_num_threads(1)
+    out = Path(out)
     start, wall = sum(tree_cpu()), time.perf_counter()
     algo = None
     try:
         ray.init(**RAY_INIT)
         algo = make_config(scenario, seed).build_algo()
-        curve = train_loop(algo, cpu_seconds, start, log)
+        spent, curve, checkpoint = 0.0, [], saved(out)
+        if checkpoint is not None:
+            algo.restore_from_path(str(checkpoint.resolve()))
+            resume = json.loads((checkpoint / RESUME).read_text())
+            spent, curve = float(resume["cpu_s"]), resume["curve"]
+            log(f"continuing from {checkpoint} ({spent:.0f} CPU s spent, iteration {len(curve)})")
+        curve = train_loop(algo, cpu_seconds, start, log, out, spent, curve)
         run = finish(algo, scenario, seed, curve, time.perf_counter() - wall)
     finally:
         if algo is not None:
@@ -321,5 +369,6 @@ def train(scenario: str, cpu_seconds: float, seed: int, out: Path, log: Callable
         "iterations": run.iterations,
         "curve": run.curve,
     }
-    write_record(Path(out), record)
+    write_record(out, record)
+    shutil.rmtree(out / CHECKPOINT, ignore_errors=True)  # finished: the record and the actors are what it leaves
     return run

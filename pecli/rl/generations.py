@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from itertools import combinations
+from itertools import combinations, count
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -112,12 +112,12 @@ def round_robin(
         for role in ROLES
     }
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
-    done = [0]
+    done = count(1)
 
     def report(result: PairingResult, cached: bool) -> None:
-        done[0] += 1
+        k = next(done)
         if on_result is not None:
-            on_result(f"{done[0]}/{len(pairings)} {result.pursuer} vs {result.evader}: {result.capture_rate:.2f}")
+            on_result(f"{k}/{len(pairings)} {result.pursuer} vs {result.evader}: {result.capture_rate:.2f}")
 
     results = run_tournament(
         scenario, players, pairings, episodes, seeds or [0], run / GENERATIONS_DIR, workers=workers, on_result=report

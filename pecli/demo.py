@@ -9,7 +9,6 @@ one episode is drawn as a GIF and several as a PNG.
 
 from __future__ import annotations
 
-import importlib.util
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,7 +60,7 @@ def run_demo(
     """Train, measure, export and draw into ``out`` (a zoo folder and the pictures); replaces an earlier demo."""
     import shutil
 
-    from pecli.export import export_checkpoint
+    from pecli.export.exporter import NEEDS_ONNX, export_available, export_checkpoint
     from pecli.match import play_match
     from pecli.policies import resolve_policy
     from pecli.render import animate_episode, draw_episodes
@@ -110,8 +109,8 @@ def run_demo(
         rows.append(Row(evader, rates[0], rates[1]))
 
     exported, export_capture = None, None
-    if importlib.util.find_spec("onnx") is None or importlib.util.find_spec("onnxruntime") is None:
-        report("3/4 skipped: exporting needs onnx and onnxruntime (pip install onnx onnxruntime: pecli's export extra)")
+    if not export_available():
+        report(f"3/4 skipped: {NEEDS_ONNX}")
     else:
         report("3/4 exporting to ONNX (parity-checked) and playing the export against greedy")
         exported = export_checkpoint(checkpoint).model

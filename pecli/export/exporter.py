@@ -10,6 +10,7 @@ each atomically (the model first; the sidecar holds the model's hash, so a misma
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -59,6 +60,14 @@ def example_inputs(layout: SILayout, learned: LearnedPolicy, batch: int = 2) -> 
     }
 
 
+NEEDS_ONNX = "pecli export needs onnx and onnxruntime: pip install onnx onnxruntime (pecli's export extra)"
+
+
+def export_available() -> bool:
+    """Whether ``onnx`` and ``onnxruntime``, which exporting and its parity check need, are installed."""
+    return all(importlib.util.find_spec(name) is not None for name in ("onnx", "onnxruntime"))
+
+
 def require_finite(learned: LearnedPolicy, checkpoint: Path) -> None:
     """:class:`ExportError` when the actor (belief included) holds a NaN or an infinity: it would command NaN."""
     broken = [name for name, p in learned.actor.named_parameters() if not th.isfinite(p).all()]
@@ -74,9 +83,7 @@ def checked_onnx(graph: PolicyGraph, example: dict[str, th.Tensor], opset: int, 
     try:
         import onnx
     except ImportError:
-        raise ExportError(
-            "pecli export needs onnx and onnxruntime: pip install onnx onnxruntime (pecli's export extra)"
-        ) from None
+        raise ExportError(NEEDS_ONNX) from None
 
     try:
         data = to_onnx(graph, example, opset)

@@ -663,6 +663,31 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
 
 
+def test_the_report_tests_the_papers_ordering_of_each_belief_against_maddpg(tmp_path: Path) -> None:
+    from pecli.experiment.report import ExperimentReport
+    from pecli.io import atomic_write_json, read_json
+
+    out, _ = handed_over_tournament(tmp_path, [0], kinds=("none", "bimdn"))
+    results = read_json(out / "tournament" / "results.json", "results")
+    for pairing in results["pairings"]:  # Ours catches 9 of 10, MADDPG 5, pure pursuit 3, whoever the evader
+        pairing["captures"] = 9 if "bimdn" in pairing["pursuer"] else 5 if "none" in pairing["pursuer"] else 3
+    atomic_write_json(out / "tournament" / "results.json", results)
+    report = ExperimentReport(out)
+    (row,) = report.ordering()  # pure pursuit is no learned group; MADDPG is the base
+    assert (row["group"], row["against"], row["evaders"], row["games"]) == ("Ours", "MADDPG", 3, 30)
+    assert (row["capture_rate"], row["against_capture_rate"]) == pytest.approx((0.9, 0.5))
+    assert row["excess_per_game"] == pytest.approx(0.2)  # 9 captures per evader where a shared 7 of 10 gives 7
+    assert row["z_test_p"] < 0.01 and row["stratified_p"] < 0.01
+    assert "## The paper's ordering: each belief against MADDPG" in report.markdown()
+    assert report.to_json()["ordering"] == [row]
+
+    for pairing in results["pairings"]:
+        pairing["captures"] = 7  # no difference: nothing to claim
+    atomic_write_json(out / "tournament" / "results.json", results)
+    (row,) = ExperimentReport(out).ordering()
+    assert row["excess_per_game"] == 0 and row["stratified_p"] == pytest.approx(1.0)
+
+
 def measured(folder: Path, pursuer: str, evader: str) -> None:
     """Records of best responses to a pair, as `pecli exploit --pair` writes them: responses catch 2 and 9 of 10,
     the pair itself 7 of 10."""

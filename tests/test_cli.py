@@ -61,6 +61,13 @@ def test_a_short_flag_means_one_option_in_every_command() -> None:
     assert shorts["-o"] == {"--out"} and shorts["-n"] == {"--episodes"}
 
 
+def test_help_shows_a_type_beside_an_option_that_takes_a_value_and_none_beside_a_flag() -> None:
+    lines = runner.invoke(app, ["experiment", "exploit", "--help"], env={"COLUMNS": "200"}).stdout.splitlines()
+    (warm,) = (line for line in lines if "--warm" in line)
+    (minutes,) = (line for line in lines if "--cpu-minutes" in line)
+    assert "<" not in warm.split("Also")[0] and "<float>" in minutes
+
+
 def test_play_help_names_every_builtin_player_of_each_side() -> None:
     shown = runner.invoke(app, ["play", "--help"], env={"COLUMNS": "400"}).stdout
     pursuer, evader = (line for line in shown.splitlines() if "A built-in name" in line)

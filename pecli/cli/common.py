@@ -56,6 +56,22 @@ _WIDTH = _width()
 console = PlainConsole(width=_WIDTH)
 err_console = PlainConsole(stderr=True, width=_WIDTH)
 
+
+def _flags_take_no_value() -> None:
+    """Show no type beside a flag in Rich's help: Typer labels ``--warm`` ``<bool>`` there, as if it took a value,
+    where its plain help (and Click) show none."""
+    from typer.core import TyperOption
+
+    typed = TyperOption.display_type_rich
+
+    def display_type_rich(self: TyperOption, ctx: Any) -> str | None:
+        return None if (self.is_flag or self.count) and self.metavar is None else typed(self, ctx)
+
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_take_no_value()
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 DEBUG_VARIABLE = "PECLI_DEBUG"

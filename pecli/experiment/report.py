@@ -247,10 +247,10 @@ class ExperimentReport:
 
     def ordering(self) -> list[dict[str, Any]]:
         """The paper's ordering claim for Table I: each learned pursuer group against MADDPG's (``none``) over every
-        evader both met (heuristics and learned evaders, as the table), with the pooled capture rates and their
-        z-test, and the captures above MADDPG's per evader with the Mantel–Haenszel test stratified by evader (a run
-        may meet its own evader, so the groups meet the evaders in different proportions: the stratified test is
-        the one to trust)."""
+        evader both met (heuristics and learned evaders, as the table): the pooled capture rates and their z-test,
+        and the group's captures above what one rate shared by both groups would give, evader by evader, with the
+        Mantel–Haenszel test stratified by evader (the groups need not meet the evaders in equal proportions: the
+        stratified test is the one to trust)."""
         if self.table != "I":
             return []
         faced: Faced = {}

@@ -737,7 +737,7 @@ def test_a_seeds_runs_of_every_kind_are_measured_as_one_population(tmp_path: Pat
     assert population_pairs(one_kind) == {}  # one kind under each schedule is no population
 
 
-def test_only_the_groups_mixed_pairs_train_together_in_the_workers(
+def test_each_pairs_responses_train_together_and_the_pair_is_recorded_before_the_next(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import pecli.experiment.exploit as experiment_exploit
@@ -749,14 +749,24 @@ def test_only_the_groups_mixed_pairs_train_together_in_the_workers(
         calls.append(([(job.out.relative_to(out), job.role, job.warm_start) for job in jobs], workers))
         return [f"result of {job.out.name}" for job in jobs]
 
+    def measured(jobs, results, folder):  # the pair's own games, recorded before the next pair trains
+        calls.append(folder.name)
+        return folder.name, results
+
     monkeypatch.setattr(experiment_exploit, "exploit_all", trained)
-    monkeypatch.setattr(experiment_exploit, "pair_result", lambda jobs, results, folder: (folder.name, results))
+    monkeypatch.setattr(experiment_exploit, "pair_result", measured)
     found = experiment_exploit.exploit_experiment(out, mixtures=True, runs=False, workers=4, cpu_minutes=1.0)
     mixed = Path("exploit/none-league-mixed")
-    assert calls == [([(mixed / "against-pursuer", "pursuer", None), (mixed / "against-evader", "evader", None)], 4)]
+    pair = [(mixed / "against-pursuer", "pursuer", None), (mixed / "against-evader", "evader", None)]
+    assert calls == [(pair, 4), "none-league-mixed"]
     assert found == {
         "none-league-mixed": ("none-league-mixed", ["result of against-pursuer", "result of against-evader"])
     }
+    calls.clear()
+    found = experiment_exploit.exploit_experiment(out, mixtures=True, workers=2, cpu_minutes=1.0)
+    assert [call if isinstance(call, str) else len(call[0]) for call in calls] == [
+        2, "none-league-s0", 2, "none-league-s1", 2, "none-league-mixed"
+    ]  # fmt: skip
     with pytest.raises(PecliError, match="no pair to measure"):
         experiment_exploit.exploit_experiment(out, mixtures=False, runs=False)
     with pytest.raises(PecliError, match="no pair to measure"):  # one kind: no seed holds a population

@@ -8,12 +8,12 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from multiprocessing import get_context
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 
 def one_torch_thread() -> None:
@@ -94,12 +94,37 @@ def _watch_parent(driver: int) -> None:
     os._exit(1)
 
 
+_worker_stopped = False  # in a worker of stoppable_pool: the driver has stopped it
+
+
+def _stop_worker(signum: int, frame: object) -> NoReturn:
+    """A worker's SIGTERM: interrupt its task like Ctrl-C, and start none of those queued behind it."""
+    global _worker_stopped
+    _worker_stopped = True
+    raise KeyboardInterrupt
+
+
 def _stoppable_worker_init(driver: int) -> None:
     """A worker of :func:`stoppable_pool`: the driver alone decides when it stops (SIGINT ignored, so a Ctrl-C
     reaches the driver only) and stops it with SIGTERM, which interrupts like Ctrl-C."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, interrupt)
+    signal.signal(signal.SIGTERM, _stop_worker)
     die_with(driver)
+
+
+def _unless_stopped(task: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """Run ``task`` in a worker, unless the driver has stopped the worker: a task already handed to a worker when
+    the pool stops (the pool queues one beyond those running) is refused like a stopped one, not started."""
+    if _worker_stopped:
+        raise KeyboardInterrupt
+    return task(*args, **kwargs)
+
+
+class _StoppablePool(ProcessPoolExecutor):
+    """A process pool whose tasks do not start in a worker the driver has stopped."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        return super().submit(_unless_stopped, fn, *args, **kwargs)
 
 
 @contextmanager
@@ -111,7 +136,7 @@ def stoppable_pool(workers: int, grace: float = 120.0) -> Iterator[ProcessPoolEx
     Ctrl-C (SIGTERM: a training run commits its state and ends) and waits up to ``grace`` seconds for them before
     killing what is left; a normal exit waits for every task.
     """
-    pool = ProcessPoolExecutor(
+    pool = _StoppablePool(
         max_workers=workers,
         mp_context=get_context("spawn"),
         initializer=_stoppable_worker_init,

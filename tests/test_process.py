@@ -38,14 +38,17 @@ def test_a_child_and_its_child_are_descendants() -> None:
 
 
 def test_a_stoppable_pool_interrupts_its_running_tasks_when_the_driver_stops(tmp_path: Path) -> None:
-    started, marker = time.monotonic(), tmp_path / "started"
+    started, marker, queued = time.monotonic(), tmp_path / "started", tmp_path / "queued"
     with pytest.raises(RuntimeError, match="the driver stops"), stoppable_pool(1, grace=30.0) as pool:
         # a task that would run a minute: the worker's Python waits on its child, as a training run would compute
         future = pool.submit(subprocess.run, ["sh", "-c", f"touch {marker}; exec sleep 60"])
+        behind = pool.submit(subprocess.run, ["touch", str(queued)])  # handed to the worker, queued behind it
         while not marker.exists():
             time.sleep(0.05)
         workers = [process.pid for process in pool._processes.values()]  # type: ignore[attr-defined]
         raise RuntimeError("the driver stops")
     assert isinstance(future.exception(timeout=5), KeyboardInterrupt)  # stopped like Ctrl-C, its own code ran on
+    assert behind.cancelled() or isinstance(behind.exception(timeout=5), KeyboardInterrupt)
+    assert not queued.exists()  # the task queued behind it never started
     assert time.monotonic() - started < 30  # not waited out, not killed at the end of the grace
     assert not set(workers) & set(live_parents())

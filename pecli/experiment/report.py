@@ -18,6 +18,7 @@ import numpy as np
 
 from pecli.errors import PecliError
 from pecli.experiment.compare import Faced, over_every_evader
+from pecli.experiment.compare import pool as faced_totals
 from pecli.experiment.exploit import POPULATION, recorded_pairs
 from pecli.experiment.folder import KEPT_FILE, open_experiment
 from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
@@ -268,7 +269,7 @@ class ExperimentReport:
             evaders, rate, base_rate, p, excess, p_stratified = over_every_evader(
                 faced, members[group], members[BASE_KIND]
             )
-            games = sum(faced[name][e][1] for name in members[group] for e in evaders)
+            _, games = faced_totals(faced, members[group], evaders)
             rows.append(
                 {"group": group, "against": BASE_KIND, "evaders": len(evaders), "games": games,
                  "capture_rate": rate, "against_capture_rate": base_rate, "z_test_p": p,

@@ -43,7 +43,7 @@ from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text, read_json
 from pecli.locks import acquire, release
-from pecli.records import JobRecord
+from pecli.records import MAX_CPU_SECONDS, JobRecord
 from pecli.roles import Role
 from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
 
@@ -105,14 +105,32 @@ class CheckpointMeta:
         ):  # the scenario's own bounds
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:
-                raise ValueError(f"{name} must be a whole number from {least} to {most}, not {value!r}")
-        for name in ("algo", "belief", "scenario", "scenario_hash", "opponent"):
+                raise ValueError(f"{name} must be a whole number from {least} to {most}, not {_shown(value)}")
+        for name in ("algo", "belief", "scenario", "scenario_hash", "opponent", "run", "parent", "pecli_version"):
             if not isinstance(getattr(self, name), str):
-                raise ValueError(f"{name} must be a string, not {getattr(self, name)!r}")
+                raise ValueError(f"{name} must be a string, not {_shown(getattr(self, name))}")
+        self._check_optional()
         if not isinstance(self.policy_kwargs, dict) or not isinstance(self.belief_kwargs, dict | None):
             raise ValueError("policy_kwargs and belief_kwargs must be JSON objects")
         if not isinstance(self.averaged, list) or not all(isinstance(p, str) for p in self.averaged):
             raise ValueError("averaged must be a list of checkpoint paths")
+
+    def _check_optional(self) -> None:
+        """Refuse what the fields pecli only reports hold if they are not what a run writes: ``ValueError``."""
+        for name, most in (("seed", 2**32 - 1), ("round", MAX_STEPS)):
+            value = getattr(self, name)
+            if (value is not None or name == "seed") and (
+                not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= most
+            ):
+                raise ValueError(f"{name} must be a whole number from 0 to {most}, not {_shown(value)}")
+        for name, most in (("cpu_seconds", MAX_CPU_SECONDS), ("eval_capture_rate", 1.0)):
+            value = getattr(self, name)
+            if value is not None and not (finite_number(value) and 0 <= value <= most):
+                raise ValueError(f"{name} must be a number from 0 to {most:g}, not {_shown(value)}")
+        if not isinstance(self.created, str):
+            raise ValueError(f"created must be a date, not {_shown(self.created)}")
+        if not isinstance(self.opponents, list) or not all(isinstance(o, dict) for o in self.opponents):
+            raise ValueError("opponents must be a list of JSON objects")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -128,6 +146,12 @@ class CheckpointMeta:
         if missing:
             raise ValueError(f"no {', '.join(missing)}")
         return cls(**{f.name: data[f.name] for f in every if f.name in data})
+
+
+def _shown(value: object) -> str:
+    """``value`` as a message quotes it: its ``repr``, cut short."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
 
 
 def metadata_path(checkpoint: Path) -> Path:

@@ -513,6 +513,12 @@ def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Sce
         ({"policy_kwargs": {"net_arch": [4096, 4096], "n_critics": 2}}, "more than its"),
         ({"frame_stack": 10**9}, "frame_stack must be a whole number from 1 to 1000"),
         ({"history_length": 10**12}, "history_length must be"),
+        ({"steps": 10**400}, r"steps must be .*, not 1000000000000000000000000000000000000\.\.\.\)$"),
+        ({"cpu_seconds": float("nan")}, "cpu_seconds must be a number from 0 to"),
+        ({"eval_capture_rate": float("inf")}, "eval_capture_rate must be a number from 0 to 1"),
+        ({"run": 5}, "run must be a string, not 5"),
+        ({"round": "x"}, "round must be a whole number"),
+        ({"opponents": [1]}, "opponents must be a list of JSON objects"),
     ],
 )
 def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(
@@ -527,6 +533,45 @@ def test_metadata_cannot_make_pecli_build_what_its_weights_do_not_hold(
     meta_path.write_text(json.dumps({**meta, **edit}))
     with pytest.raises(PolicyError, match=message):
         resolve_policy(str(copy / "run" / "pursuer" / "final.zip"), "pursuer", quick)
+
+
+@pytest.mark.parametrize(
+    "weights, message",
+    [
+        ("nan", "actor.mu.0.weight holds NaN or infinite values"),
+        ("list", "a list, not a table of named tensors"),
+        ("text", "actor.mu.0.weight is not a named tensor"),
+        ("complex", "actor.mu.0.weight is a tensor of complex64"),
+        ("sparse", "actor.mu.0.weight is a sparse tensor"),
+    ],
+)
+def test_weights_that_are_no_finite_tensors_are_one_clear_line(
+    zoo: Path, tmp_path: Path, quick: Scenario, weights: str, message: str
+) -> None:
+    import io
+
+    import torch as th
+
+    from pecli.errors import PolicyError
+
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo, copy)
+    checkpoint = copy / "run" / "pursuer" / "final.zip"
+    with zipfile.ZipFile(checkpoint) as archive:
+        state = th.load(io.BytesIO(archive.read("policy.pth")), weights_only=True)
+    first = "actor.mu.0.weight"
+    state = {
+        "nan": {**state, first: th.full_like(state[first], float("nan"))},
+        "list": list(state),
+        "text": {**state, first: "weights"},
+        "complex": {**state, first: state[first].to(th.complex64)},
+        "sparse": {**state, first: state[first].to_sparse()},
+    }[weights]
+    buffer = io.BytesIO()
+    th.save(state, buffer)
+    rewrite_zip(checkpoint, {"policy.pth": buffer.getvalue()})
+    with pytest.raises(PolicyError, match=f"damaged policy weights \\({message}\\)"):
+        resolve_policy(str(checkpoint), "pursuer", quick)
 
 
 def test_weights_that_unpack_beyond_the_limit_are_not_read(

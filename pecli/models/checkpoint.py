@@ -145,7 +145,26 @@ def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any],
             params[name.removesuffix(".pth")] = loaded
     if "policy" not in params:
         raise ZooError(f"{path}: not a checkpoint (it has no policy weights)")
+    if problem := _weights_problem(params["policy"]):
+        raise ZooError(f"{path}: damaged policy weights ({problem})")
     return params, variables
+
+
+def _weights_problem(state: Any) -> str:
+    """Why ``state`` is not a network's state dict (names to dense, real, finite tensors), or ``""``."""
+    if not isinstance(state, dict):
+        return f"a {type(state).__name__}, not a table of named tensors"
+    for name, value in state.items():
+        shown = str(name)[:80]
+        if not isinstance(name, str) or not isinstance(value, th.Tensor):
+            return f"{shown} is not a named tensor"
+        if value.layout != th.strided:
+            return f"{shown} is a sparse tensor"
+        if not (value.is_floating_point() or value.dtype == th.int64):  # int64: batch norm's counts
+            return f"{shown} is a tensor of {str(value.dtype).removeprefix('torch.')}"
+        if value.is_floating_point() and not bool(th.isfinite(value).all()):
+            return f"{shown} holds NaN or infinite values"
+    return ""
 
 
 def spaces_of(meta: CheckpointMeta, scenario: Scenario) -> tuple[spaces.Dict, spaces.Box]:

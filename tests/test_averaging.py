@@ -19,6 +19,8 @@ def test_the_mean_state_averages_weights_and_keeps_the_newest_counters() -> None
     assert int(mean["n"]) == 7  # an integer buffer (a batch-norm counter) is not averaged
     with pytest.raises(ZooError, match="different parameters"):
         mean_state([old, {"w": new["w"]}])
+    with pytest.raises(ZooError, match="w differ in shape"):
+        mean_state([old, {"w": th.zeros(3, 3), "n": new["n"]}])
 
 
 def test_one_network_ignores_the_training_settings_a_belief_carries() -> None:

@@ -50,6 +50,9 @@ def mean_state(states: list[dict[str, th.Tensor]]) -> dict[str, th.Tensor]:
     keys = list(states[-1])
     if any(list(state) != keys for state in states):
         raise ZooError("their networks have different parameters")
+    for key in keys:
+        if any(state[key].shape != states[-1][key].shape for state in states):
+            raise ZooError(f"their networks' {key[:80]} differ in shape")
     return {
         key: (
             th.stack([state[key].double() for state in states]).mean(0).to(states[-1][key].dtype)
@@ -73,8 +76,9 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
                 raise ZooError(
                     f"{path}: its {name} differs from {paths[-1]}'s: only checkpoints of one network average"
                 )
+    states = [read_weights(path)[0]["policy"] for path in paths]  # each error names its file
     try:
-        policy = mean_state([read_weights(path)[0]["policy"] for path in paths])
+        policy = mean_state(states)
     except ZooError as exc:
         raise ZooError(f"{', '.join(map(str, paths))}: {exc}") from None
     buffer = io.BytesIO()

@@ -3,7 +3,7 @@ no constant or constant-shaped tensor larger than an export ever holds.
 
 A downloaded zoo may hold a graph built to exhaust memory (``ConstantOfShape`` of ``[10^6, 10^6]``) or to loop
 (``Loop``, ``Scan``, ``If``). :func:`check_graph` refuses, in one line: other operators, functions, subgraphs,
-sparse or external constants, a constant of more than 2^24 elements, a size (``ConstantOfShape``, ``Expand``,
+sparse, external, NaN or infinite constants, a constant of more than 2^24 elements, a size (``ConstantOfShape``, ``Expand``,
 ``Reshape``, ``Tile``, ``Range``) that constants decide (folded through ``Concat``, ``Mul``, ... ) above 2^24
 elements, and any whole-number constant above 65 536 on the way to a size. What remains are sizes computed from the
 inputs' shapes, which the sidecar bounds (:class:`pecli.runtime.ExportedModel`), times small constants. The check
@@ -156,6 +156,8 @@ def check_graph(model: bytes, source: str = "model") -> None:
             raise refuse("a constant stored in another file")
         if _elements(tensor.dims) > MAX_ELEMENTS:
             raise refuse(f"a constant of shape {list(tensor.dims)[:8]}")
+        if not _finite(numpy_helper.to_array(tensor)):
+            raise refuse(f"the constant {tensor.name[:40]} of NaN or infinite values")
         constants[tensor.name] = numpy_helper.to_array(tensor) if _elements(tensor.dims) <= 64 else None
     for node in graph.node:
         if node.op_type not in ALLOWED_OPS:
@@ -176,9 +178,13 @@ def check_graph(model: bytes, source: str = "model") -> None:
                 or max(len(attribute.ints), len(attribute.floats), len(attribute.strings)) > MAX_ELEMENTS
             ):
                 raise refuse("a constant larger than any export holds")
+            if not all(map(math.isfinite, [attribute.f, *attribute.floats])):
+                raise refuse(f"{node.op_type} with {attribute.name} NaN or infinite")
             if attribute.type == onnx.AttributeProto.INTS and any(abs(v) > MAX_DIM for v in attribute.ints):
                 raise refuse(f"{node.op_type} with {attribute.name} {list(attribute.ints)[:8]}")
         if node.op_type == "Constant":
+            if not all(_finite(numpy_helper.to_array(t)) for t in tensors_of(node, onnx)):
+                raise refuse("a constant of NaN or infinite values")
             constants[node.output[0]] = _constant(node, onnx, numpy_helper)
         elif node.op_type in FOLDED:
             constants[node.output[0]] = _fold(node, [constants.get(name) for name in node.input])
@@ -194,6 +200,23 @@ def check_graph(model: bytes, source: str = "model") -> None:
             start, limit, delta = (float(constants[name].reshape(-1)[0]) for name in node.input[:3])
             if delta == 0 or not math.isfinite((limit - start) / delta) or (limit - start) / delta > MAX_ELEMENTS:
                 raise refuse(f"a Range of {start:g} to {limit:g} by {delta:g}")
+
+
+def _finite(array: Any) -> bool:
+    """Whether a constant holds no NaN or infinity (a network's weights never do)."""
+    import numpy as np
+
+    return array.dtype.kind not in "fc" or bool(np.isfinite(array).all())
+
+
+def tensors_of(node: Any, onnx: Any) -> list[Any]:
+    """The tensors a node's attributes hold."""
+    found = []
+    for attribute in node.attribute:
+        if attribute.type == onnx.AttributeProto.TENSOR:
+            found.append(attribute.t)
+        found.extend(attribute.tensors)
+    return found
 
 
 def _constant(node: Any, onnx: Any, numpy_helper: Any) -> Any:

@@ -75,6 +75,44 @@ def read_sidecar(model: str | Path) -> dict[str, Any]:
     return data
 
 
+def _shown(value: object) -> str:
+    """``value`` as a message quotes it, cut short."""
+    text = str(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
+
+
+def _check_sidecar_values(model: ExportedModel) -> None:
+    """:class:`ExportError` unless the sidecar's names are strings, its sensor finite and its limits two
+    finite positive numbers (what an export writes)."""
+    names = {"role": model.role, "belief": model.belief, "scenario.name": model.scenario_name}
+    names["scenario.fingerprint"] = model.scenario_fingerprint
+    for key, value in names.items():
+        if not isinstance(value, str):
+            raise ExportError(f"damaged sidecar: {key} = {_shown(value)}, not a string")
+    for key, value in (("sensor.range_m", model.sensor_range), ("sensor.fov_rad", model.sensor_fov)):
+        if not (math.isfinite(value) and value > 0):
+            raise ExportError(f"damaged sidecar: {key} = {_shown(value)}, not a positive number")
+    if not isinstance(model.sidecar["layout"]["own_heading"], bool):
+        raise ExportError("damaged sidecar: layout.own_heading is not true or false")
+    if model.limits.shape != (2,) or not (np.isfinite(model.limits).all() and (model.limits > 0).all()):
+        raise ExportError(
+            f"damaged sidecar: command_limits = {_shown(model.limits.tolist())}, not two positive numbers"
+        )
+
+
+def _check_outputs(session: Any) -> None:
+    """:class:`ExportError` unless the graph answers ``command`` and ``action``, each ``(batch, 2)`` floats."""
+    outputs = {node.name: node for node in session.get_outputs()}
+    for name in ("command", "action"):
+        node = outputs.get(name)
+        if node is None:
+            raise ExportError(f"the graph has no output '{name}' (its outputs: {_shown(sorted(outputs))})")
+        if node.type not in ("tensor(float)", "tensor(double)") or len(node.shape) != 2 or node.shape[1] != 2:
+            raise ExportError(
+                f"the graph's output '{name}' is a {node.type} of shape {node.shape}, not floats of shape (batch, 2)"
+            )
+
+
 class ExportedModel:
     """An exported graph and its sidecar: SI state estimates in, SI commands out, batched.
 
@@ -111,6 +149,7 @@ class ExportedModel:
             raise ExportError(f"incomplete sidecar (no '{exc.args[0]}')") from None
         except (TypeError, ValueError) as exc:
             raise ExportError(f"incomplete sidecar ({type(exc).__name__}: {exc})") from None
+        _check_sidecar_values(self)
         bounded = {
             "dt_s": (self.dt, 10.0),
             "frame_skip": (self.frame_skip, 1000),
@@ -119,7 +158,7 @@ class ExportedModel:
             "history_stride": (self.history_stride, 10_000),
             "dim": (self.dim, 10_000),
         }  # a scenario's own bounds: nothing an export can have is larger
-        bad = [f"{key} = {value}" for key, (value, most) in bounded.items() if not 0 < value <= most]
+        bad = [f"{key} = {_shown(value)}" for key, (value, most) in bounded.items() if not 0 < value <= most]
         if not 0 <= self.draws <= 65_536:
             bad.append(f"draws = {self.draws}")
         if bad:
@@ -137,6 +176,7 @@ class ExportedModel:
                 f"the graph's inputs {found} do not match its sidecar's {expected} (shapes after the batch)"
             )
         self.outputs = [node.name for node in session.get_outputs()]
+        _check_outputs(session)
 
     @classmethod
     def load(cls, path: str | Path, threads: int = 1) -> ExportedModel:

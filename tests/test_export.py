@@ -438,6 +438,26 @@ def test_missing_or_damaged_models_give_one_clear_line(
         sidecar_path(copy).write_text(json.dumps(data))
 
     cases.append((r"m.onnx: incomplete sidecar \(no 'layout'\)", no_layout))
+
+    def edited(change: dict) -> None:
+        fresh()
+        data = json.loads(sidecar_path(copy).read_text())
+        for key, value in change.items():
+            *parents, last = key.split(".")
+            part = data
+            for name in parents:
+                part = part[name]
+            part[last] = value
+        sidecar_path(copy).write_text(json.dumps(data))
+
+    for change, message in (
+        ({"command_limits": [float("nan"), 2.0]}, r"command_limits = \[nan, 2.0\], not two positive numbers"),
+        ({"sensor.fov_rad": float("inf")}, "sensor.fov_rad = inf, not a positive number"),
+        ({"role": ["pursuer"]}, r"role = \['pursuer'\], not a string"),
+        ({"layout.own_heading": "no"}, "layout.own_heading is not true or false"),
+        ({"control.history_length": 10**40}, r"history_length = 1000000000000000000000000000000000000\.\.\."),
+    ):
+        cases.append((f"m.onnx: damaged sidecar: {message}", lambda change=change: edited(change)))
     cases.append(
         (r"not a pecli sidecar of format .* \(no 'format'\)", lambda: (fresh(), sidecar_path(copy).write_text("{}")))
     )
@@ -452,6 +472,20 @@ def test_missing_or_damaged_models_give_one_clear_line(
         result = runner.invoke(app, ["play", "-p", str(copy), "-c", "quick"])
         assert result.exit_code == 1 and re.search(as_policy, result.output) and "Traceback" not in result.output
     fresh()
+    graph = onnx.load(model)
+    graph.graph.output[0].name = "renamed"  # its command: only an output of that name is read
+    for node in graph.graph.node:
+        node.output[:] = ["renamed" if name == "command" else name for name in node.output]
+    with pytest.raises(ExportError, match=r"m.onnx: the graph has no output 'command' \(its outputs: "):
+        ExportedModel.from_bytes(
+            graph.SerializeToString(), json.loads(sidecar_path(copy).read_text()), source=str(copy)
+        )
+    policy = resolve_policy(str(model), "pursuer", quick)
+    policy.model.run = lambda *args: {"command": np.zeros((1, 2)), "action": np.zeros((1, 2))}
+    with pytest.raises(PolicyError, match=r"its graph answered actions of shape \(1, 2\), not \(2, 2\)"):
+        game = Game(quick, n=2)
+        game.reset(seed=0)
+        policy.act(game.observe()["pursuer"])
     copy.write_bytes(model.read_bytes()[:-100])
     with pytest.raises(PecliError, match="does not match its sidecar"):  # named in a tournament
         find_players([str(copy)], quick)
@@ -552,24 +586,31 @@ def poisoned_copy(checkpoint: Path, name: str) -> Path:
 
 @pytest.fixture(scope="module")
 def broken(exports, quick: Scenario) -> dict:
-    """The 'none' pursuer's checkpoint, a copy of it with NaN weights in its run, and that network as an ONNX graph."""
+    """The 'none' pursuer's checkpoint, a copy of it with NaN weights in its run, and that network as an ONNX graph
+    (loaded past the graph check, which refuses its NaN constants: what the runtime does with NaN is checked too)."""
+    import onnxruntime as ort
+
     from pecli.export.exporter import onnx_bytes
     from pecli.export.sidecar import build_sidecar
     from pecli.policies.learned import LearnedPolicy
 
     checkpoint, _ = exports["none"]
     diverged = poisoned_copy(checkpoint, "diverged")
-    learned = LearnedPolicy.load(diverged, "pursuer", quick)
-    assert not th.isfinite(learned.actor.mu[0].weight).all()
+    learned = LearnedPolicy.load(checkpoint, "pursuer", quick)
+    with th.no_grad():
+        learned.actor.mu[0].weight.fill_(math.nan)
     graph, data = onnx_bytes(learned, SILayout(quick, "pursuer"), 17)
     sidecar = build_sidecar(graph, quick, learned.meta, checkpoint, 17, learned.draws)
-    return {"checkpoint": checkpoint, "diverged": diverged, "model": ExportedModel.from_bytes(data, sidecar)}
+    with pytest.raises(ExportError, match="NaN or infinite values"):
+        ExportedModel.from_bytes(data, sidecar)
+    session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
+    return {"checkpoint": checkpoint, "diverged": diverged, "model": ExportedModel(session, sidecar)}
 
 
 def test_a_network_with_nan_weights_is_not_exported(broken) -> None:
     diverged = broken["diverged"]
     result = runner.invoke(app, ["export", "onnx", str(diverged), "-n", "1"])
-    assert result.exit_code == 1 and "NaN or infinite" in result.output and "not exported" in result.output
+    assert result.exit_code == 1 and "damaged policy weights" in result.output and "NaN or infinite" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert not diverged.with_suffix(".onnx").exists()
 

@@ -124,6 +124,23 @@ def test_a_small_plain_graph_passes() -> None:
             ),
             "value_ints",
         ),
+        (
+            graph(
+                [helper.make_node("Add", ["obs", "w"], ["y"])],
+                [numpy_helper.from_array(np.full(4, np.nan, np.float32), "w")],
+            ),
+            "the constant w of NaN or infinite values",
+        ),
+        (
+            graph(
+                [
+                    helper.make_node("Constant", [], ["w"], value=numpy_helper.from_array(np.array([np.inf]))),
+                    helper.make_node("Add", ["obs", "w"], ["y"]),
+                ]
+            ),
+            "a constant of NaN or infinite values",
+        ),
+        (graph([helper.make_node("Elu", ["obs"], ["y"], alpha=float("nan"))]), "Elu with alpha NaN or infinite"),
         (with_sparse_or_external("sparse"), "sparse constants"),
         (with_sparse_or_external("external"), "stored in another file"),
         (b"\x00not a model", "not an ONNX model"),

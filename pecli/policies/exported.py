@@ -39,7 +39,9 @@ class ExportedPolicy(WindowedPolicy):
         seed: seed of a mixed belief's draws (:meth:`reset` with a seed restarts them).
     """
 
-    def __init__(self, model: ExportedModel, scenario: Scenario, seed: int | None = None) -> None:
+    def __init__(
+        self, model: ExportedModel, scenario: Scenario, seed: int | None = None, source: str = "the exported model"
+    ) -> None:
         super().__init__(
             model.role,  # type: ignore[arg-type]
             scenario,
@@ -51,6 +53,7 @@ class ExportedPolicy(WindowedPolicy):
             seed=seed,
         )
         self.model = model
+        self.source = source
         self.layout = SILayout(scenario, self.role)
         self.half = np.array(scenario.arena.half)
         self.command = np.zeros((0, 2))
@@ -69,7 +72,7 @@ class ExportedPolicy(WindowedPolicy):
                 f"{path} was exported for scenario '{model.scenario_name}' ({model.scenario_fingerprint}), "
                 f"not for '{scenario.name}' ({scenario.fingerprint()}): pass the config it was trained with"
             )
-        return cls(model, scenario, seed=seed)
+        return cls(model, scenario, seed=seed, source=str(path))
 
     def reset(self, n: int, mask: np.ndarray | None = None, seed: int | None = None) -> None:
         if mask is None or n != self.n:
@@ -91,8 +94,13 @@ class ExportedPolicy(WindowedPolicy):
         obs, window = self._inputs(stack, history)
         uniform, normal = draws if draws is not None else (None, None)
         outputs = self.model.run(obs, window, uniform, normal)
+        action = outputs["action"]
+        if action.shape != (obs.shape[0], 2):
+            raise PolicyError(
+                f"{self.source}: its graph answered actions of shape {action.shape}, not ({obs.shape[0]}, 2)"
+            )
         self.command[due] = outputs["command"]
-        return outputs["action"]
+        return action
 
     def current_belief(self, games: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The belief given the window of the last :meth:`act` for the first ``games`` games:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -1071,3 +1072,22 @@ def test_a_cluster_address_where_nothing_answers_is_refused_at_once() -> None:
         _check_reachable("127.0.0.1:99999999999999999999")
     with pytest.raises(PecliError, match="no host 'no-such-host.invalid'"):
         _check_reachable("no-such-host.invalid:6379")
+
+
+@pytest.mark.parametrize(
+    ("state", "message"),
+    [
+        ({"driver": "x"}, "driver: Input should be a valid dictionary"),
+        ({"driver": {"pid": 10**30}}, "driver.pid: Input should be less than or equal to"),
+        ({"runs": [1]}, "runs: Input should be a valid dictionary"),
+        ({"sessions": [{"until_cpu_hours": "x"}]}, "sessions.0.until_cpu_hours: Input should be a valid number"),
+        ({"stages": [1]}, "stages: Input should be a valid dictionary"),
+        ([1], r"damaged experiment record \(not a JSON object\)"),
+    ],
+)
+def test_a_damaged_experiment_record_is_one_line(tmp_path: Path, state: object, message: str) -> None:
+    (tmp_path / "experiment.yaml").write_text(yaml.safe_dump(load_experiment("smoke").spec.model_dump(mode="json")))
+    (tmp_path / "experiment.json").write_text(json.dumps(state))
+    result = runner.invoke(app, ["experiment", "status", str(tmp_path)])
+    assert result.exit_code == 1 and re.search(message, result.output), result.output
+    assert result.output.strip().count("\n") == 0

@@ -3,9 +3,9 @@ no constant or constant-shaped tensor larger than an export ever holds.
 
 A downloaded zoo may hold a graph built to exhaust memory (``ConstantOfShape`` of ``[10^6, 10^6]``) or to loop
 (``Loop``, ``Scan``, ``If``). :func:`check_graph` refuses, in one line: other operators, functions, subgraphs,
-sparse, external, NaN or infinite constants, a constant of more than 2^24 elements, a size (``ConstantOfShape``, ``Expand``,
-``Reshape``, ``Tile``, ``Range``) that constants decide (folded through ``Concat``, ``Mul``, ... ) above 2^24
-elements, and any whole-number constant above 65 536 on the way to a size. What remains are sizes computed from the
+sparse, external, NaN or infinite constants, a constant of more than 2^24 elements, a size (``ConstantOfShape``,
+``Expand``, ``Reshape``, ``Tile``, ``Range``) that constants decide (folded through ``Concat``, ``Mul``, ... ) above
+2^24 elements, and any whole-number constant above 65 536 on the way to a size. What remains are sizes computed from the
 inputs' shapes, which the sidecar bounds (:class:`pecli.runtime.ExportedModel`), times small constants. The check
 needs the ``onnx`` package (``pecli[export]``); a robot with only ``onnxruntime`` plays its own exports and skips it.
 """

@@ -183,7 +183,7 @@ def check_graph(model: bytes, source: str = "model") -> None:
             if attribute.type == onnx.AttributeProto.INTS and any(abs(v) > MAX_DIM for v in attribute.ints):
                 raise refuse(f"{node.op_type} with {attribute.name} {list(attribute.ints)[:8]}")
         if node.op_type == "Constant":
-            if not all(_finite(numpy_helper.to_array(t)) for t in tensors_of(node, onnx)):
+            if not all(_finite(numpy_helper.to_array(t)) for t in _tensors_of(node, onnx)):
                 raise refuse("a constant of NaN or infinite values")
             constants[node.output[0]] = _constant(node, onnx, numpy_helper)
         elif node.op_type in FOLDED:
@@ -209,7 +209,7 @@ def _finite(array: Any) -> bool:
     return array.dtype.kind not in "fc" or bool(np.isfinite(array).all())
 
 
-def tensors_of(node: Any, onnx: Any) -> list[Any]:
+def _tensors_of(node: Any, onnx: Any) -> list[Any]:
     """The tensors a node's attributes hold."""
     found = []
     for attribute in node.attribute:

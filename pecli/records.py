@@ -1,5 +1,6 @@
-"""The records kept beside a run, typed: ``run.json`` (the command that made the run) and ``selfplay.json`` (a
-self-play run's turns, opponent pools and meta-game games).
+"""The records kept beside a run, typed: ``run.json`` (the command that made the run), ``selfplay.json`` (a
+self-play run's turns, opponent pools and meta-game games), a tournament's ``results.json`` and an experiment's
+``kept.json``.
 
 A zoo may come from elsewhere, so every field is bounded and checked before pecli acts on it (a record that is
 not one ends in one line naming the field). Torch-free: reading a record loads no network.
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 from typing import Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, RootModel, ValidationError, model_validator
 
 from pecli.errors import PecliError
 from pecli.io import first_problem
@@ -110,6 +111,55 @@ class SelfPlayRecord(_Record):
                 raise ValueError(f"pools: the {role} pool says it is the {pool.role}'s")
         return self
 
+
+class PairingRow(_Record):
+    """One pairing of a tournament's ``results.json``: its games and captures."""
+
+    pursuer: str = Field(max_length=MAX_TEXT)
+    evader: str = Field(max_length=MAX_TEXT)
+    episodes: int = Field(ge=1, le=MAX_COUNT)
+    captures: int = Field(ge=0, le=MAX_COUNT)
+    time_to_capture_mean: float = Field(ge=0.0, le=1.0)
+    time_to_capture_std: float = Field(ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _captures_are_games(self) -> PairingRow:
+        if self.captures > self.episodes:
+            raise ValueError(f"{self.captures} captures in {self.episodes} games")
+        return self
+
+
+class RatingRow(_Record):
+    """One player's Bradley–Terry rating in ``results.json``."""
+
+    name: str = Field(max_length=MAX_TEXT)
+    role: Role
+    spec: str = Field(max_length=MAX_TEXT)
+    elo: float
+    stderr: float = Field(ge=0.0)
+
+
+class TournamentRecord(_Record):
+    """What a tournament's ``results.json`` must hold to be read: every pairing between two rated players."""
+
+    episodes_per_seed: int = Field(ge=1, le=MAX_COUNT)
+    seeds: list[int] = Field(min_length=1, max_length=MAX_ENTRIES)
+    pairings: list[PairingRow] = Field(max_length=MAX_ENTRIES)
+    ratings: list[RatingRow] = Field(max_length=MAX_ENTRIES)
+
+    @model_validator(mode="after")
+    def _pairings_name_rated_players(self) -> TournamentRecord:
+        roles = {r.name: r.role for r in self.ratings}
+        if len(roles) != len(self.ratings):
+            raise ValueError("ratings: a player is rated twice")
+        for row in self.pairings:
+            for role, name in (("pursuer", row.pursuer), ("evader", row.evader)):
+                if roles.get(name) != role:
+                    raise ValueError(f"pairings: {name[:60]} is no rated {role}")
+        return self
+
+
+KeptRecord = RootModel[dict[str, dict[Role, list[str]]]]  # an experiment's kept.json: run -> role -> checkpoints
 
 RecordT = TypeVar("RecordT", bound=BaseModel)
 

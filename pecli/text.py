@@ -17,6 +17,12 @@ def plural(count: int, word: str) -> str:
     return f"{count:,} {word}" if count == 1 else f"{count:,} {word}s"
 
 
+def shortened(value: object, most: int = 40) -> str:
+    """``repr(value)`` as a message quotes it: cut to ``most`` characters, ``...`` marking the cut."""
+    text = repr(value)
+    return text if len(text) <= most else f"{text[: most - 3]}..."
+
+
 def cpu_time(seconds: float, budget: float | None = None) -> str:
     """CPU seconds in one unit, and out of ``budget`` (CPU seconds) when there is one: both in the unit the larger
     of the two calls for (CPU-s under a minute, CPU-min under an hour, CPU-h above) and with the same decimals,

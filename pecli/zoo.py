@@ -46,6 +46,7 @@ from pecli.locks import acquire, release
 from pecli.records import MAX_CPU_SECONDS, JobRecord
 from pecli.roles import Role
 from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
+from pecli.text import shortened
 
 FINAL = "final"
 LAST = "last"
@@ -105,10 +106,10 @@ class CheckpointMeta:
         ):  # the scenario's own bounds
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or not least <= value <= most:
-                raise ValueError(f"{name} must be a whole number from {least} to {most}, not {_shown(value)}")
+                raise ValueError(f"{name} must be a whole number from {least} to {most}, not {shortened(value)}")
         for name in ("algo", "belief", "scenario", "scenario_hash", "opponent", "run", "parent", "pecli_version"):
             if not isinstance(getattr(self, name), str):
-                raise ValueError(f"{name} must be a string, not {_shown(getattr(self, name))}")
+                raise ValueError(f"{name} must be a string, not {shortened(getattr(self, name))}")
         self._check_optional()
         if not isinstance(self.policy_kwargs, dict) or not isinstance(self.belief_kwargs, dict | None):
             raise ValueError("policy_kwargs and belief_kwargs must be JSON objects")
@@ -122,13 +123,13 @@ class CheckpointMeta:
             if (value is not None or name == "seed") and (
                 not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= most
             ):
-                raise ValueError(f"{name} must be a whole number from 0 to {most}, not {_shown(value)}")
-        for name, most in (("cpu_seconds", MAX_CPU_SECONDS), ("eval_capture_rate", 1.0)):
+                raise ValueError(f"{name} must be a whole number from 0 to {most}, not {shortened(value)}")
+        for name, bound in (("cpu_seconds", MAX_CPU_SECONDS), ("eval_capture_rate", 1.0)):
             value = getattr(self, name)
-            if value is not None and not (finite_number(value) and 0 <= value <= most):
-                raise ValueError(f"{name} must be a number from 0 to {most:g}, not {_shown(value)}")
+            if value is not None and not (finite_number(value) and 0 <= value <= bound):
+                raise ValueError(f"{name} must be a number from 0 to {bound:g}, not {shortened(value)}")
         if not isinstance(self.created, str):
-            raise ValueError(f"created must be a date, not {_shown(self.created)}")
+            raise ValueError(f"created must be a date, not {shortened(self.created)}")
         if not isinstance(self.opponents, list) or not all(isinstance(o, dict) for o in self.opponents):
             raise ValueError("opponents must be a list of JSON objects")
 
@@ -146,12 +147,6 @@ class CheckpointMeta:
         if missing:
             raise ValueError(f"no {', '.join(missing)}")
         return cls(**{f.name: data[f.name] for f in every if f.name in data})
-
-
-def _shown(value: object) -> str:
-    """``value`` as a message quotes it: its ``repr``, cut short."""
-    text = repr(value)
-    return text if len(text) <= 40 else f"{text[:37]}..."
 
 
 def metadata_path(checkpoint: Path) -> Path:

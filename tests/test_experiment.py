@@ -10,7 +10,9 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -662,6 +664,32 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     assert "## Best responses to each run's players" in text and row in text
     assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
+
+
+@pytest.mark.parametrize(
+    ("file", "change", "message"),
+    [
+        ("kept", lambda kept: {run: "x" for run in kept}, r"kept.json: damaged record of kept checkpoints"),
+        ("kept", lambda kept: {run: {"referee": []} for run in kept}, r"kept.json: damaged record of kept"),
+        ("results", lambda r: {**r, "ratings": "x"}, r"results.json: damaged tournament's results \(ratings"),
+        ("results", lambda r: {**r, "ratings": [{"name": "a"}]}, r"ratings.0.role: Field required"),
+        ("results", lambda r: {**r, "episodes_per_seed": float("nan")}, r"episodes_per_seed"),
+        ("results", lambda r: {**r, "pairings": [{"pursuer": "p"}]}, r"pairings.0.evader: Field required"),
+        ("results", lambda r: {**r, "pairings": [{**r["pairings"][0], "captures": 11}]}, r"11 captures in 10"),
+        ("results", lambda r: {**r, "pairings": [{**r["pairings"][0], "pursuer": "x"}]}, r"x is no rated pursuer"),
+    ],
+)
+def test_a_damaged_tournament_record_is_one_line_in_the_report(
+    tmp_path: Path, file: str, change: Callable[[Any], Any], message: str
+) -> None:
+    from pecli.io import read_json
+
+    out, _ = handed_over_tournament(tmp_path, [0])
+    path = out / "kept.json" if file == "kept" else out / "tournament" / "results.json"
+    path.write_text(json.dumps(change(read_json(path, "record"))))
+    result = runner.invoke(app, ["experiment", "report", str(out)])
+    assert result.exit_code == 1 and re.search(message, result.output), result.output
+    assert result.output.strip().count("\n") == 0
 
 
 def test_the_report_tests_the_papers_ordering_of_each_belief_against_maddpg(tmp_path: Path) -> None:

@@ -25,6 +25,7 @@ from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve
 from pecli.policies.mix import first_member
+from pecli.records import KeptRecord, TournamentRecord, validated
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.stats import Rating, interquartile_mean, stratified_bootstrap_interval, ties_with_best
@@ -97,15 +98,8 @@ class ExperimentReport:
                 f"{out}: the experiment has not reached its tournament yet "
                 "(`pecli experiment status` says how far it got)"
             ) from None
-        if not (
-            isinstance(self.data, dict)
-            and isinstance(kept, dict)
-            and all(key in self.data for key in ("pairings", "ratings", "episodes_per_seed", "seeds"))
-        ):
-            raise PecliError(
-                f"{out}: damaged results (tournament/results.json or {KEPT_FILE} is not what "
-                "`pecli experiment run` writes): run it again to rewrite them"
-            )
+        validated(TournamentRecord, self.data, out / "tournament" / "results.json", "tournament's results")
+        validated(KeptRecord, kept, out / KEPT_FILE, "record of kept checkpoints")
         runs = {run.name: run for run in self.experiment.runs()}
         one_schedule = len(self.experiment.spec.runs.schedules) == 1  # then a kind's group is the paper's kind
         self.group_of_spec: dict[str, str] = {}

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from pecli.errors import PolicyError
 from pecli.game import Game
 from pecli.policies.base import Policy
 from pecli.scenario import Scenario
@@ -165,6 +166,9 @@ def play_match(
         frames.append((game.state()[:record], {k: v[:record] for k, v in game.seen().items()}))
     for step in range(1, scenario.horizon + 1):
         pursuer_action, evader_action = pursuer.act(obs["pursuer"]), evader.act(obs["evader"])
+        for role, action in (("pursuer", pursuer_action), ("evader", evader_action)):
+            if not np.isfinite(action).all():  # a damaged network would drive the game to NaN states silently
+                raise PolicyError(f"the {role} played a NaN or infinite action at step {step}: its network is damaged")
         if record:  # each player's belief given its window at the current frame
             _record_beliefs(beliefs, pursuer, evader, record)
         result = game.step(pursuer_action, evader_action)

@@ -31,7 +31,6 @@ import numpy as np
 
 from pecli.errors import ExportError
 from pecli.onnx_guard import MAX_MODEL_BYTES, check_graph
-from pecli.text import shortened
 
 FORMAT = "pecli-onnx/1"
 SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
@@ -76,6 +75,12 @@ def read_sidecar(model: str | Path) -> dict[str, Any]:
     return data
 
 
+def _shown(value: object) -> str:
+    """``value`` as a message quotes it, cut short (the robot runtime copies no other pecli module for this)."""
+    text = str(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
+
+
 def _check_sidecar_values(model: ExportedModel) -> None:
     """:class:`ExportError` unless the sidecar's names are strings, its sensor finite and its limits two
     finite positive numbers (what an export writes)."""
@@ -83,15 +88,15 @@ def _check_sidecar_values(model: ExportedModel) -> None:
     names["scenario.fingerprint"] = model.scenario_fingerprint
     for key, value in names.items():
         if not isinstance(value, str):
-            raise ExportError(f"damaged sidecar: {key} = {shortened(value)}, not a string")
+            raise ExportError(f"damaged sidecar: {key} = {_shown(value)}, not a string")
     for key, number in (("sensor.range_m", model.sensor_range), ("sensor.fov_rad", model.sensor_fov)):
         if not (math.isfinite(number) and number > 0):
-            raise ExportError(f"damaged sidecar: {key} = {shortened(number)}, not a positive number")
+            raise ExportError(f"damaged sidecar: {key} = {_shown(number)}, not a positive number")
     if not isinstance(model.sidecar["layout"]["own_heading"], bool):
         raise ExportError("damaged sidecar: layout.own_heading is not true or false")
     if model.limits.shape != (2,) or not (np.isfinite(model.limits).all() and (model.limits > 0).all()):
         raise ExportError(
-            f"damaged sidecar: command_limits = {shortened(model.limits.tolist())}, not two positive numbers"
+            f"damaged sidecar: command_limits = {_shown(model.limits.tolist())}, not two positive numbers"
         )
 
 
@@ -101,7 +106,7 @@ def _check_outputs(session: Any) -> None:
     for name in ("command", "action"):
         node = outputs.get(name)
         if node is None:
-            raise ExportError(f"the graph has no output '{name}' (its outputs: {shortened(sorted(outputs))})")
+            raise ExportError(f"the graph has no output '{name}' (its outputs: {_shown(sorted(outputs))})")
         if node.type not in ("tensor(float)", "tensor(double)") or len(node.shape) != 2 or node.shape[1] != 2:
             raise ExportError(
                 f"the graph's output '{name}' is a {node.type} of shape {node.shape}, not floats of shape (batch, 2)"
@@ -153,7 +158,7 @@ class ExportedModel:
             "history_stride": (self.history_stride, 10_000),
             "dim": (self.dim, 10_000),
         }  # a scenario's own bounds: nothing an export can have is larger
-        bad = [f"{key} = {shortened(value)}" for key, (value, most) in bounded.items() if not 0 < value <= most]
+        bad = [f"{key} = {_shown(value)}" for key, (value, most) in bounded.items() if not 0 < value <= most]
         if not 0 <= self.draws <= 65_536:
             bad.append(f"draws = {self.draws}")
         if bad:

@@ -139,3 +139,17 @@ def test_play_behaviour_prints_it_and_joins_the_json() -> None:
     }
     refused = CliRunner().invoke(app, ["play", "-c", "quick", "-n", "20000", "--behaviour"])
     assert refused.exit_code == 1 and "at most 10,000" in refused.output
+
+
+def test_a_player_that_acts_nan_ends_the_match_in_one_line(quick: Scenario) -> None:
+    from pecli.errors import PolicyError
+
+    class Damaged(PurePursuit):
+        def act(self, obs: dict) -> np.ndarray:
+            action = super().act(obs)
+            action[0] = np.nan
+            return action
+
+    evader = resolve_policy("greedy", "evader", quick)
+    with pytest.raises(PolicyError, match="the pursuer played a NaN or infinite action at step 1"):
+        play_match(quick, Damaged(quick, "pursuer"), evader, episodes=4)

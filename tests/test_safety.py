@@ -18,6 +18,7 @@ from pecli.cli import app
 from pecli.policies import resolve_policy
 from pecli.rl.train import DEFAULT_OPPONENT, TrainJob, checkpoint_meta, make_env, make_model, with_overrides
 from pecli.scenario import Scenario
+from pecli.trust import UntrustedFileError
 from pecli.zoo import Run
 
 runner = CliRunner()
@@ -173,6 +174,19 @@ def pickled_where_older_pecli_kept_them(path: Path) -> None:
         assert b"pecli.rl.policies" in __import__("base64").b64decode(
             json.loads(archive.read("data"))["policy_class"][":serialized:"]
         )
+
+
+def test_playing_a_checkpoint_unpacks_its_policy_weights_alone(zoo: Path, tmp_path: Path) -> None:
+    from pecli.models.checkpoint import read_weights
+
+    marker = tmp_path / "ran"
+    path = poisoned_copy(zoo, tmp_path, marker, "data")  # data is never unpickled either
+    rewrite_zip(path, {"actor.optimizer.pth": pickle.dumps(Payload(marker)), "big.pth": bytes(5_000_000)})
+    result = runner.invoke(app, ["play", "-p", str(path), "-e", "greedy", "-n", "4"])
+    assert result.exit_code == 0, result.output  # what a policy does not need is not unpacked, nor refused
+    with pytest.raises(UntrustedFileError, match="holds pickled objects"):
+        read_weights(path)  # every entry, as a resumed run reads them
+    assert not marker.exists()
 
 
 def test_a_checkpoint_of_an_older_pecli_needs_trust(zoo: Path, tmp_path: Path, monkeypatch) -> None:

@@ -34,6 +34,7 @@ from pecli.scenario import MAX_BATCH, MAX_DEPTH, MAX_WIDTH, Scenario
 from pecli.trust import trusted, untrusted
 from pecli.zoo import CheckpointMeta, ZooError
 
+POLICY_ENTRY = "policy.pth"  # the network's weights in an SB3 zip; the optimisers' are beside it
 MAX_WEIGHTS_BYTES = 4 << 30  # one state dict of a checkpoint, unpacked: far above any network pecli trains
 MAX_CRITICS = 64
 MAX_QUANTILES = 10_000
@@ -120,14 +121,21 @@ def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cp
         raise ZooError(f"{name}: damaged ({type(exc).__name__}: {exc})") from None
 
 
-def read_weights(path: str | Path, device: str = "cpu") -> tuple[dict[str, Any], dict[str, Any] | None]:
+def read_weights(
+    path: str | Path, device: str = "cpu", only: tuple[str, ...] | None = None
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
     """The state dicts (``policy``, ``actor.optimizer``, ...) and the torch variables of an SB3 zip, read
-    with :func:`load_tensors`; nothing else in the zip is looked at. :class:`ZooError` if it cannot."""
+    with :func:`load_tensors`; nothing else in the zip is looked at, nor any entry but ``only`` (e.g.
+    ``("policy.pth",)``) where it is given. :class:`ZooError` if it cannot."""
     params: dict[str, Any] = {}
     variables = None
     try:
         with zipfile.ZipFile(path) as archive:
-            members = [info for info in archive.infolist() if info.filename.endswith(".pth")]
+            members = [
+                info
+                for info in archive.infolist()
+                if info.filename.endswith(".pth") and (only is None or info.filename in only)
+            ]
             if sum(info.file_size for info in members) > MAX_WEIGHTS_BYTES:
                 raise ZooError(
                     f"{path}: its weights unpack to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli checkpoint"
@@ -241,8 +249,8 @@ def load_policy(path: str | Path, meta: CheckpointMeta, scenario: Scenario, devi
             return get_algorithm(meta.algo).cls.load(path, device=device).policy
         except Exception as exc:  # a truncated or foreign zip: SB3 raises many kinds
             raise ZooError(f"cannot load {path}: {type(exc).__name__}: {exc}") from None
-    params, _ = read_weights(path, device)  # bounded in size; refuses pickled objects
-    check_weights_size(meta, path)  # before any layer is built
+    check_weights_size(meta, path)  # from the zip's directory, before anything is unpacked or built
+    params, _ = read_weights(path, device, only=(POLICY_ENTRY,))  # bounded in size; refuses pickled objects
     try:
         policy = build_policy(meta, scenario, device)
     except ZooError as exc:

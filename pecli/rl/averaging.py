@@ -20,7 +20,7 @@ from pathlib import Path
 import torch as th
 
 from pecli.io import atomic_path, atomic_write_json
-from pecli.models.checkpoint import read_weights
+from pecli.models.checkpoint import POLICY_ENTRY, read_weights
 from pecli.zoo import CheckpointMeta, ZooError, metadata_path, read_metadata
 
 SAME_NETWORK = (
@@ -76,7 +76,7 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
                 raise ZooError(
                     f"{path}: its {name} differs from {paths[-1]}'s: only checkpoints of one network average"
                 )
-    states = [read_weights(path)[0]["policy"] for path in paths]  # each error names its file
+    states = [read_weights(path, only=(POLICY_ENTRY,))[0]["policy"] for path in paths]  # each error names its file
     try:
         policy = mean_state(states)
     except ZooError as exc:

@@ -204,9 +204,12 @@ def train(args: argparse.Namespace) -> None:
     import importlib
     import sys
 
+    from pecli.export.exporter import NEEDS_ONNX, export_available
     from pecli.export.network import export_network
     from pecli.io import atomic_write_json
 
+    if not export_available():  # before an hour of training, not after it
+        raise SystemExit(NEEDS_ONNX)
     sys.path.insert(0, str(Path(__file__).parent))
     scenario = load_scenario(args.config)
     for peer in args.peers:
@@ -232,6 +235,8 @@ def train(args: argparse.Namespace) -> None:
                 "settings": run.settings, "versions": versions(),
             }  # fmt: skip
             atomic_write_json(out / "peer.json", record)
+            if hasattr(module, "discard_checkpoint"):
+                module.discard_checkpoint(out)
 
 
 def pecli_players(run: Path) -> dict[str, str]:

@@ -370,5 +370,10 @@ def train(scenario: str, cpu_seconds: float, seed: int, out: Path, log: Callable
         "curve": run.curve,
     }
     write_record(out, record)
-    shutil.rmtree(out / CHECKPOINT, ignore_errors=True)  # finished: the record and the actors are what it leaves
     return run
+
+
+def discard_checkpoint(out: Path) -> None:
+    """Remove a finished run's last checkpoint, once its actors are exported: the record and the exports are
+    what it leaves (until then, the same command exports them from the checkpoint)."""
+    shutil.rmtree(out / CHECKPOINT, ignore_errors=True)

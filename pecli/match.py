@@ -168,7 +168,7 @@ def play_match(
         pursuer_action, evader_action = pursuer.act(obs["pursuer"]), evader.act(obs["evader"])
         for role, action in (("pursuer", pursuer_action), ("evader", evader_action)):
             if not np.isfinite(action).all():  # a damaged network would drive the game to NaN states silently
-                raise PolicyError(f"the {role} played a NaN or infinite action at step {step}: its network is damaged")
+                raise PolicyError(f"the {role} played a NaN or infinite action at step {step}: it cannot be played")
         if record:  # each player's belief given its window at the current frame
             _record_beliefs(beliefs, pursuer, evader, record)
         result = game.step(pursuer_action, evader_action)

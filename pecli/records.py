@@ -1,6 +1,6 @@
 """The records kept beside a run, typed: ``run.json`` (the command that made the run), ``selfplay.json`` (a
-self-play run's turns, opponent pools and meta-game games), a tournament's ``results.json`` and an experiment's
-``kept.json``.
+self-play run's turns, opponent pools and meta-game games), a learner's progress in its durable ``state.json``,
+a tournament's ``results.json`` and an experiment's ``kept.json``.
 
 A zoo may come from elsewhere, so every field is bounded and checked before pecli acts on it (a record that is
 not one ends in one line naming the field). Torch-free: reading a record loads no network.
@@ -8,7 +8,7 @@ not one ends in one line naming the field). Torch-free: reading a record loads n
 
 from __future__ import annotations
 
-from typing import Literal, TypeVar
+from typing import Annotated, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, RootModel, ValidationError, model_validator
 
@@ -159,7 +159,68 @@ class TournamentRecord(_Record):
         return self
 
 
-KeptRecord = RootModel[dict[str, dict[Role, list[str]]]]  # an experiment's kept.json: run -> role -> checkpoints
+class ProgressRecord(_Record):
+    """What a learner's durable ``state.json`` says of its progress (the part a driver's status reads)."""
+
+    steps: int = Field(ge=0, le=MAX_COUNT)
+    cpu_seconds: float = Field(ge=0.0, le=MAX_CPU_SECONDS)
+
+
+class _Open(_Record):
+    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)  # what it holds beside is kept
+
+
+class DriverRecord(_Open):
+    """The driver that last wrote ``experiment.json``."""
+
+    pid: int | None = Field(default=None, ge=1, le=2**31 - 1)
+    host: str | None = Field(default=None, max_length=MAX_TEXT)
+    started: float | None = Field(default=None, ge=0.0)
+    ended: str | None = Field(default=None, max_length=MAX_TEXT)
+
+
+class RunRecord(_Open):
+    """One run's status as the driver recorded it."""
+
+    status: str = Field(default="pending", max_length=100)
+    error: str = Field(default="", max_length=100_000)
+    host: str = Field(default="", max_length=MAX_TEXT)
+
+
+class StageRecord(_Open):
+    """A tournament stage's progress."""
+
+    pairings: int = Field(default=0, ge=0, le=MAX_COUNT)
+    status: str = Field(default="", max_length=100)
+
+
+class SessionRecord(_Open):
+    """One ``pecli experiment run`` (what status reads of it)."""
+
+    until_cpu_hours: float | None = Field(default=None, gt=0.0)
+
+
+class StateRecord(_Open):
+    """What ``experiment.json`` must hold to be read."""
+
+    name: str | None = Field(default=None, max_length=MAX_TEXT)
+    fingerprint: str | None = Field(default=None, max_length=MAX_TEXT)
+    driver: DriverRecord | None = None
+    runs: dict[str, RunRecord] = Field(default_factory=dict, max_length=MAX_ENTRIES)
+    stages: dict[str, str | StageRecord] = Field(default_factory=dict, max_length=100)
+    sessions: list[SessionRecord] = Field(default_factory=list, max_length=MAX_ENTRIES)
+
+
+class TaskMarker(_Open):
+    """Where and since when a run's task runs (``tasks/<run>.json``)."""
+
+    started: float = Field(default=0.0, ge=0.0)
+    host: str = Field(default="", max_length=MAX_TEXT)
+
+
+_Paths = Annotated[list[Annotated[str, Field(max_length=MAX_TEXT)]], Field(max_length=MAX_ENTRIES)]
+# an experiment's kept.json: run -> role -> checkpoints
+KeptRecord = RootModel[Annotated[dict[str, dict[Role, _Paths]], Field(max_length=MAX_ENTRIES)]]
 
 RecordT = TypeVar("RecordT", bound=BaseModel)
 

@@ -13,6 +13,7 @@ from pecli.records import Turn
 from pecli.rl.budget import budget_reached, cpu_through, scheduled_turns, whole_rounds
 from pecli.rl.pool import OpponentPool
 from pecli.rl.state import SelfPlayState
+from pecli.zoo import RESUME_DIR
 
 LEAGUE = load_experiment("strength-small").runs()[0]  # no exploiters, 150 rounds planned
 EXPLOITERS = LEAGUE.scenario.training.selfplay.model_copy(  # an evader exploiter every round once 1 CPU-h is spent
@@ -68,6 +69,16 @@ def test_only_whole_rounds_count(turns: list[dict], rounds: int, spent: float, r
     (tmp_path / run.name / SELFPLAY_STATE).write_text(json.dumps(state_record(turns)))
     progress = run_progress(run, tmp_path)
     assert progress.done is reached and progress.round == rounds
+
+
+@pytest.mark.parametrize("damage", [{"steps": "x"}, {"cpu_seconds": -1.0}, {"steps": 10**20}])
+def test_a_damaged_learner_record_counts_as_none_in_the_progress(damage: dict, tmp_path: Path) -> None:
+    resume = tmp_path / LEAGUE.name / "pursuer" / RESUME_DIR
+    resume.mkdir(parents=True)
+    (resume / "state.json").write_text(json.dumps({"steps": 4000, "cpu_seconds": 12.5, "model": "m.zip"}))
+    assert (run_progress(LEAGUE, tmp_path).steps, run_progress(LEAGUE, tmp_path).cpu_seconds) == (4000, 12.5)
+    (resume / "state.json").write_text(json.dumps({"steps": 4000, "cpu_seconds": 12.5, **damage}))
+    assert (run_progress(LEAGUE, tmp_path).steps, run_progress(LEAGUE, tmp_path).cpu_seconds) == (0, 0.0)
 
 
 def test_a_round_is_whole_once_its_scheduled_exploiters_trained() -> None:

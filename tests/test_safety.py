@@ -599,6 +599,24 @@ def test_weights_that_unpack_beyond_the_limit_are_not_read(
         resolve_policy(str(zoo / "run" / "pursuer" / "final.zip"), "pursuer", quick)
 
 
+def test_averaging_copies_no_more_than_a_checkpoint_unpacks_to(zoo: Path, tmp_path: Path, monkeypatch) -> None:
+    from pecli.rl import averaging
+    from pecli.zoo import ZooError
+
+    source = zoo / "run" / "pursuer" / "final"
+    for suffix in (".zip", ".json"):
+        shutil.copy(source.with_suffix(suffix), tmp_path / f"newest{suffix}")
+    with zipfile.ZipFile(source.with_suffix(".zip")) as archive:
+        size = sum(item.file_size for item in archive.infolist())
+    monkeypatch.setattr(averaging, "MAX_WEIGHTS_BYTES", size + 1000)
+    averaging.average_checkpoints([source.with_suffix(".zip"), tmp_path / "newest.zip"], tmp_path / "mean.zip")
+    with zipfile.ZipFile(tmp_path / "mean.zip") as archive:  # the newest's other entries, as they were
+        assert sorted(archive.namelist()) == sorted(zipfile.ZipFile(tmp_path / "newest.zip").namelist())
+    rewrite_zip(tmp_path / "newest.zip", {"notes.bin": bytes(2000)})  # a bomb's extra entry, at a test's size
+    with pytest.raises(ZooError, match=f"newest.zip: unpacks to more than {size + 1000:,} bytes"):
+        averaging.average_checkpoints([source.with_suffix(".zip"), tmp_path / "newest.zip"], tmp_path / "mean.zip")
+
+
 @pytest.mark.parametrize(
     "old, new, message",
     [

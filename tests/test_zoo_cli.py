@@ -185,6 +185,35 @@ def test_show_refuses_a_zip_that_is_not_a_checkpoint(zoo: Path, tmp_path: Path) 
     assert invoke("zoo", "show", str(zoo / "p" / "pursuer" / "final.zip")).exit_code == 0
 
 
+def test_show_refuses_damaged_weights_even_where_the_network_cannot_be_checked(zoo: Path, tmp_path: Path) -> None:
+    import io
+    import json
+
+    import torch
+
+    source = zoo / "p" / "pursuer" / "final"
+    meta = json.loads(source.with_suffix(".json").read_text())
+    (tmp_path / "final.json").write_text(json.dumps({**meta, "scenario": "a-lab-elsewhere"}))  # no scenario at hand
+    with zipfile.ZipFile(source.with_suffix(".zip")) as archive, zipfile.ZipFile(tmp_path / "final.zip", "w") as out:
+        for info in archive.infolist():
+            out.writestr(info, archive.read(info))
+    result = invoke("zoo", "show", str(tmp_path / "final.zip"))
+    assert result.exit_code == 0 and "('a-lab-elsewhere') is not at hand" in result.output
+    with zipfile.ZipFile(source.with_suffix(".zip")) as archive, zipfile.ZipFile(tmp_path / "final.zip", "w") as out:
+        for info in archive.infolist():
+            data = archive.read(info)
+            if info.filename == "policy.pth":
+                weights = torch.load(io.BytesIO(data), weights_only=True)
+                next(iter(weights.values())).fill_(float("nan"))
+                buffer = io.BytesIO()
+                torch.save(weights, buffer)
+                data = buffer.getvalue()
+            out.writestr(info, data)
+    result = invoke("zoo", "show", str(tmp_path / "final.zip"))
+    assert result.exit_code == 1 and "damaged policy weights" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
 def test_average_writes_the_mean_of_a_runs_checkpoints(zoo: Path, tmp_path: Path, quick) -> None:
     from pecli.game import Game
     from pecli.models.checkpoint import read_weights

@@ -85,21 +85,22 @@ def show(checkpoint: Annotated[Path, typer.Argument(help="A checkpoint file (.zi
 
 
 def _check_network(checkpoint: Path, meta: CheckpointMeta) -> None:
-    """Refuse a checkpoint whose weights do not fit the network its metadata describes; say on stderr
-    when that cannot be checked."""
+    """Refuse a checkpoint whose weights do not fit the network its metadata describes; where that cannot be
+    checked, say so on stderr and refuse only weights that are no network's (not dense finite tensors)."""
+    from pecli.models.checkpoint import POLICY_ENTRY, load_policy, read_weights
+
+    scenario = _scenario_of(checkpoint, meta) if meta.policy_kwargs else None
+    if scenario is not None:
+        load_policy(checkpoint, meta, scenario)  # ZooError: one line naming the first difference
+        return
+    read_weights(checkpoint, only=(POLICY_ENTRY,))  # ZooError: damaged or pickled weights, in one line
     if not meta.policy_kwargs:
         err_console.print(f"note: {checkpoint} predates network metadata; its network was not checked", highlight=False)
-        return
-    scenario = _scenario_of(checkpoint, meta)
-    if scenario is None:
+    else:
         err_console.print(
             f"note: the scenario of {checkpoint} ('{meta.scenario}') is not at hand; its network was not checked",
             highlight=False,
         )
-        return
-    from pecli.models.checkpoint import load_policy
-
-    load_policy(checkpoint, meta, scenario)  # ZooError: one line naming the first difference
 
 
 def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:

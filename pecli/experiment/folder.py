@@ -10,14 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
-
 from pecli.errors import PecliError
 from pecli.experiment.runs import RunProgress, run_progress
 from pecli.experiment.spec import LoadedExperiment, RunSpec, experiment_from_dict
 from pecli.io import read_json
 from pecli.locks import process_alive
-from pecli.records import MAX_COUNT, MAX_ENTRIES, MAX_TEXT, validated
+from pecli.records import StateRecord, TaskMarker, validated
 from pecli.scenario import read_yaml
 
 SPEC_FILE = "experiment.yaml"
@@ -46,58 +44,6 @@ def open_experiment(out: Path) -> LoadedExperiment:
             f"{out} holds no experiment (no {SPEC_FILE}): start one with `pecli experiment run NAME --out {out}`"
         )
     return experiment_from_dict(read_yaml(path), str(path))  # ConfigError in one line if damaged
-
-
-class _Checked(BaseModel):
-    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)
-
-
-class DriverRecord(_Checked):
-    """The driver that last wrote ``experiment.json``."""
-
-    pid: int | None = Field(default=None, ge=1, le=2**31 - 1)
-    host: str | None = Field(default=None, max_length=MAX_TEXT)
-    started: float | None = Field(default=None, ge=0.0)
-    ended: str | None = Field(default=None, max_length=MAX_TEXT)
-
-
-class RunRecord(_Checked):
-    """One run's status as the driver recorded it."""
-
-    status: str = Field(default="pending", max_length=100)
-    error: str = Field(default="", max_length=100_000)
-    host: str = Field(default="", max_length=MAX_TEXT)
-
-
-class StageRecord(_Checked):
-    """A tournament stage's progress."""
-
-    pairings: int = Field(default=0, ge=0, le=MAX_COUNT)
-    status: str = Field(default="", max_length=100)
-
-
-class SessionRecord(_Checked):
-    """One ``pecli experiment run`` (what status reads of it)."""
-
-    until_cpu_hours: float | None = Field(default=None, gt=0.0)
-
-
-class StateRecord(_Checked):
-    """What ``experiment.json`` must hold to be read."""
-
-    name: str | None = Field(default=None, max_length=MAX_TEXT)
-    fingerprint: str | None = Field(default=None, max_length=MAX_TEXT)
-    driver: DriverRecord | None = None
-    runs: dict[str, RunRecord] = Field(default_factory=dict, max_length=MAX_ENTRIES)
-    stages: dict[str, str | StageRecord] = Field(default_factory=dict, max_length=100)
-    sessions: list[SessionRecord] = Field(default_factory=list, max_length=MAX_ENTRIES)
-
-
-class TaskMarker(_Checked):
-    """Where and since when a run's task runs (``tasks/<run>.json``)."""
-
-    started: float = Field(default=0.0, ge=0.0)
-    host: str = Field(default="", max_length=MAX_TEXT)
 
 
 def read_state(out: Path) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from typing import Any
 from pecli.errors import ConfigError, PecliError
 from pecli.experiment.spec import RunSpec
 from pecli.io import read_json
+from pecli.records import ProgressRecord, validated
 from pecli.rl.budget import budget_reached, whole_rounds
 from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE
 from pecli.rl.handover import stale_averages
@@ -45,12 +46,12 @@ class RunProgress:
         return asdict(self)
 
 
-def _read_json(path: Path) -> dict[str, Any] | None:
+def _progress(path: Path) -> ProgressRecord | None:
+    """A learner's progress; ``None`` when there is none yet or it is damaged (its trainer says so)."""
     try:
-        data = read_json(path, "record")
+        return validated(ProgressRecord, read_json(path, "record"), path, "record")
     except PecliError:
         return None
-    return data if isinstance(data, dict) else None
 
 
 def _selfplay_state(path: Path) -> SelfPlayState | None:
@@ -64,9 +65,9 @@ def _selfplay_state(path: Path) -> SelfPlayState | None:
 def run_progress(run: RunSpec, zoo: Path) -> RunProgress:
     """The run's progress from its files (cheap: a few small JSON files); all zeros for a run not started."""
     folder = zoo / run.name
-    records = {role: _read_json(folder / role / RESUME_DIR / DURABLE_RECORD) for role in run.roles}
-    steps = sum(int(r.get("steps", 0)) for r in records.values() if r)
-    cpu = max((float(r.get("cpu_seconds", 0.0)) for r in records.values() if r), default=0.0)
+    records = [_progress(folder / role / RESUME_DIR / DURABLE_RECORD) for role in run.roles]
+    steps = sum(r.steps for r in records if r is not None)
+    cpu = max((r.cpu_seconds for r in records if r is not None), default=0.0)
     if not run.selfplay:
         role = run.schedule
         done = (folder / role / f"{FINAL}.zip").is_file()

@@ -12,6 +12,7 @@ with its policy weights replaced by the mean, and metadata that names what was a
 from __future__ import annotations
 
 import io
+import shutil
 import zipfile
 from dataclasses import replace
 from datetime import UTC, datetime
@@ -20,7 +21,7 @@ from pathlib import Path
 import torch as th
 
 from pecli.io import atomic_path, atomic_write_json
-from pecli.models.checkpoint import POLICY_ENTRY, read_weights
+from pecli.models.checkpoint import MAX_WEIGHTS_BYTES, POLICY_ENTRY, read_weights
 from pecli.zoo import CheckpointMeta, ZooError, metadata_path, read_metadata
 
 SAME_NETWORK = (
@@ -88,8 +89,14 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
         zipfile.ZipFile(paths[-1]) as source,
         zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target,
     ):
+        if sum(item.file_size for item in source.infolist()) > MAX_WEIGHTS_BYTES:  # what is copied, unpacked
+            raise ZooError(f"{paths[-1]}: unpacks to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli checkpoint")
         for item in source.infolist():
-            target.writestr(item, buffer.getvalue() if item.filename == "policy.pth" else source.read(item.filename))
+            if item.filename == POLICY_ENTRY:
+                target.writestr(item, buffer.getvalue())
+                continue
+            with source.open(item) as entry, target.open(item, "w") as copy:  # streamed: the rest as it is
+                shutil.copyfileobj(entry, copy)
     meta = replace(
         newest, averaged=[str(path) for path in paths], created=datetime.now(UTC).isoformat(timespec="seconds")
     )

@@ -1,6 +1,6 @@
 """The records kept beside a run, typed: ``run.json`` (the command that made the run), ``selfplay.json`` (a
 self-play run's turns, opponent pools and meta-game games), a learner's progress in its durable ``state.json``,
-a tournament's ``results.json`` and an experiment's ``kept.json``.
+a tournament's ``results.json``, and an experiment's ``kept.json``, ``experiment.json`` and task markers.
 
 A zoo may come from elsewhere, so every field is bounded and checked before pecli acts on it (a record that is
 not one ends in one line naming the field). Torch-free: reading a record loads no network.

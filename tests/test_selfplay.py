@@ -254,6 +254,12 @@ def test_rounds_begun_in_the_curriculum_are_not_averaged(quick: Scenario, tmp_pa
     for role in ("pursuer", "evader"):
         averaged = read_metadata(tmp_path / "sp" / role / "average.zip").averaged
         assert averaged == [str(tmp_path / "sp" / role / f"round-00{r}.zip") for r in (2, 3)]
+        shown = invoke("zoo", "rounds", str(tmp_path / "sp"), role)  # the same rounds as one mixed player
+        assert shown.exit_code == 0 and shown.stdout.strip() == "mix:" + ",".join(averaged)
+    played = invoke("play", "-p", shown.stdout.strip().replace("evader", "pursuer"), "-e", shown.stdout.strip())
+    assert played.exit_code == 0, played.output
+    refused = invoke("zoo", "rounds", str(tmp_path / "sp" / "pursuer"), "pursuer")
+    assert refused.exit_code == 1 and "is not a self-play run (no selfplay.json)" in refused.output
 
 
 @pytest.mark.parametrize("last", [0, 1])

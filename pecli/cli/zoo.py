@@ -208,6 +208,32 @@ def best(
     raise PecliError(f"every rated {role} checkpoint in {zoo} is damaged: train or copy them again")
 
 
+@app.command("rounds")
+@user_errors
+def rounds(
+    run: Annotated[Path, typer.Argument(help="A self-play run's folder.", show_default=False)],
+    role: Annotated[str, typer.Argument(help="pursuer or evader.", show_default=False)],
+) -> None:
+    """Print the rounds a self-play run hands over the mean of, as one mixed player (a ``mix:`` string).
+
+    What a run hands over, ``ROLE/average.zip``, is one network: the mean of its last rounds' weights. The same
+    rounds played as a mixture, each game by one of them, are harder for a best response to exploit and a
+    little weaker against fixed opponents (docs/benchmarks/exploitability.md). For example:
+    ``pecli exploit "$(pecli zoo rounds zoo/strong pursuer)" --role pursuer -c league``.
+    """
+    from pecli.rl.state import handed_over_rounds
+    from pecli.zoo import Run
+
+    if role not in ("pursuer", "evader"):
+        raise PecliError(f"role must be pursuer or evader, not '{role}'")
+    if not run.is_dir():
+        raise PecliError(f"no run at {run}")
+    paths = handed_over_rounds(Run(run), role)
+    if any("," in str(path) for path in paths):
+        raise PecliError(f"{run}: a path with a comma cannot join a mixture (mix: separates its players by commas)")
+    typer.echo("mix:" + ",".join(str(path) for path in paths))
+
+
 @app.command("average")
 @user_errors
 def average(

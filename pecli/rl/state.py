@@ -16,7 +16,7 @@ from pecli.io import read_json
 from pecli.policies.registry import builtin_names
 from pecli.records import SelfPlayRecord, Turn, validated
 from pecli.rl import budget
-from pecli.rl.handover import STATE_FILE
+from pecli.rl.handover import STATE_FILE, averaged_rounds
 from pecli.rl.pool import LEAGUES, MAIN, OpponentPool
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
@@ -85,6 +85,20 @@ def read_state_file(path: Path) -> SelfPlayState:
     """The state in a ``selfplay.json`` at ``path``, validated; :class:`PecliError` if it is unreadable or damaged."""
     record = validated(SelfPlayRecord, read_json(path, "self-play state"), path, "self-play state")
     return SelfPlayState.from_record(record)
+
+
+def handed_over_rounds(run: Run, role: Role) -> list[Path]:
+    """The round checkpoints of ``role`` that the self-play ``run`` hands over the mean of (``average.zip``), as
+    its ``selfplay.json`` and ``config.yaml`` say: played as a mixture (``mix:``) instead, each game by one of
+    them. :class:`PecliError` in one line where the run has none."""
+    state = read_state(run)
+    rounds = averaged_rounds(state.records(), state.curriculum_steps, run.scenario()).get(role)
+    if not rounds:
+        raise PecliError(f"run '{run.name}' hands over no {role} yet (no round of it after the curriculum)")
+    paths = [run.path / checkpoint for checkpoint in rounds]  # run-relative, inside the learner's folder
+    if missing := [path for path in paths if not path.is_file()]:
+        raise PecliError(f"run '{run.name}' lacks its round checkpoint {missing[0]}")
+    return paths
 
 
 def checkpoint_name(round: int) -> str:

@@ -218,9 +218,11 @@ class TaskMarker(_Open):
     host: str = Field(default="", max_length=MAX_TEXT)
 
 
+RUN_NAME = r"^[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}$"  # one folder name: a run stays inside its zoo (pecli.zoo)
 _Paths = Annotated[list[Annotated[str, Field(max_length=MAX_TEXT)]], Field(max_length=MAX_ENTRIES)]
+_RunName = Annotated[str, Field(pattern=RUN_NAME)]
 # an experiment's kept.json: run -> role -> checkpoints
-KeptRecord = RootModel[Annotated[dict[str, dict[Role, _Paths]], Field(max_length=MAX_ENTRIES)]]
+KeptRecord = RootModel[Annotated[dict[_RunName, dict[Role, _Paths]], Field(max_length=MAX_ENTRIES)]]
 
 RecordT = TypeVar("RecordT", bound=BaseModel)
 

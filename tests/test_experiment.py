@@ -841,10 +841,11 @@ def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> Non
     result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out")])
     assert result.exit_code == 1 and "no players kept yet (kept.json)" in result.output
     assert len(result.output.strip().splitlines()) == 1
-    (tmp_path / "out" / "kept.json").write_text(json.dumps({"none-s0": {"pursuer": [7]}}))
-    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out")])
-    assert result.exit_code == 1 and "kept.json: damaged record of kept checkpoints" in result.output
-    assert len(result.output.strip().splitlines()) == 1
+    for kept in ({"none-s0": {"pursuer": [7]}}, {"../../elsewhere": {"pursuer": ["p.zip"], "evader": ["e.zip"]}}):
+        (tmp_path / "out" / "kept.json").write_text(json.dumps(kept))  # a run's name would be a folder of OUT
+        result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out")])
+        assert result.exit_code == 1 and "kept.json: damaged record of kept checkpoints" in result.output
+        assert len(result.output.strip().splitlines()) == 1
 
 
 # -- on Ray ---------------------------------------------------------------------------------------------

@@ -615,6 +615,11 @@ def test_averaging_copies_no_more_than_a_checkpoint_unpacks_to(zoo: Path, tmp_pa
     rewrite_zip(tmp_path / "newest.zip", {"notes.bin": bytes(2000)})  # a bomb's extra entry, at a test's size
     with pytest.raises(ZooError, match=f"newest.zip: unpacks to more than {size + 1000:,} bytes"):
         averaging.average_checkpoints([source.with_suffix(".zip"), tmp_path / "newest.zip"], tmp_path / "mean.zip")
+    rewrite_zip(tmp_path / "newest.zip", {"notes.bin": b"a note of the run's, stored as it is"})
+    data = (tmp_path / "newest.zip").read_bytes()
+    (tmp_path / "newest.zip").write_bytes(data.replace(b"a note", b"A note"))  # its CRC no longer holds
+    with pytest.raises(ZooError, match="newest.zip: damaged entry 'notes.bin'"):
+        averaging.average_checkpoints([source.with_suffix(".zip"), tmp_path / "newest.zip"], tmp_path / "mean.zip")
 
 
 @pytest.mark.parametrize(

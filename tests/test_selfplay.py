@@ -260,6 +260,14 @@ def test_rounds_begun_in_the_curriculum_are_not_averaged(quick: Scenario, tmp_pa
     assert played.exit_code == 0, played.output
     refused = invoke("zoo", "rounds", str(tmp_path / "sp" / "pursuer"), "pursuer")
     assert refused.exit_code == 1 and "is not a self-play run (no selfplay.json)" in refused.output
+    with mock.patch("pecli.policies.mix.MAX_MEMBERS", 1):  # a mixture pecli would refuse is not printed
+        refused = invoke("zoo", "rounds", str(tmp_path / "sp"), "pursuer")
+    assert refused.exit_code == 1 and "mix: takes at most 1 players, got 2" in refused.output
+    outside = tmp_path / "elsewhere.zip"
+    (tmp_path / "sp" / "pursuer" / "round-003.zip").rename(outside)
+    (tmp_path / "sp" / "pursuer" / "round-003.zip").symlink_to(outside)  # a stranger's run, linking out of itself
+    refused = invoke("zoo", "rounds", str(tmp_path / "sp"), "pursuer")
+    assert refused.exit_code == 1 and "round-003.zip leads out of the run" in refused.output
 
 
 @pytest.mark.parametrize("last", [0, 1])
@@ -270,10 +278,14 @@ def test_the_average_spans_average_last_rounds_and_catches_up_on_resume(
     average = tmp_path / "sp" / "pursuer" / "average.zip"
     if last == 0:
         assert not average.exists()
+        shown = invoke("zoo", "rounds", str(tmp_path / "sp"), "pursuer")
+        assert shown.exit_code == 1 and "hands over no average (its selfplay.average_last is 0)" in shown.output
         return
     assert read_metadata(average).averaged == [str(tmp_path / "sp" / "pursuer" / "round-002.zip")]
     assert th.equal(parameters(average), parameters(tmp_path / "sp" / "pursuer" / "round-002.zip"))
     average.unlink()  # as if stopped after round 2 was recorded, before its average was written
+    shown = invoke("zoo", "rounds", str(tmp_path / "sp"), "pursuer")
+    assert shown.exit_code == 0 and "average.zip is not yet the mean of these rounds" in shown.stderr
     resumed = job(quick, tmp_path, "sp", **{"selfplay.average_last": last})
     resumed.resume = True
     loop = SelfPlay(resumed)

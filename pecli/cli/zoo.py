@@ -12,6 +12,7 @@ import typer
 from rich.table import Table
 
 from pecli.cli.common import TABLE_WIDTH, console, err_console, user_errors
+from pecli.cli.train import RoleChoice
 from pecli.errors import PecliError
 
 if TYPE_CHECKING:
@@ -212,7 +213,7 @@ def best(
 @user_errors
 def rounds(
     run: Annotated[Path, typer.Argument(help="A self-play run's folder.", show_default=False)],
-    role: Annotated[str, typer.Argument(help="pursuer or evader.", show_default=False)],
+    role: Annotated[RoleChoice, typer.Argument(help="The role whose rounds to mix.", show_default=False)],
 ) -> None:
     """Print the rounds a self-play run hands over the mean of, as one mixed player (a ``mix:`` string).
 
@@ -221,17 +222,22 @@ def rounds(
     little weaker against fixed opponents (docs/benchmarks/exploitability.md). For example:
     ``pecli exploit "$(pecli zoo rounds zoo/strong pursuer)" --role pursuer -c league``.
     """
+    from pecli.policies.mix import mix_members
     from pecli.rl.state import handed_over_rounds
     from pecli.zoo import Run
 
-    if role not in ("pursuer", "evader"):
-        raise PecliError(f"role must be pursuer or evader, not '{role}'")
     if not run.is_dir():
         raise PecliError(f"no run at {run}")
-    paths = handed_over_rounds(Run(run), role)
-    if any("," in str(path) for path in paths):
-        raise PecliError(f"{run}: a path with a comma cannot join a mixture (mix: separates its players by commas)")
-    typer.echo("mix:" + ",".join(str(path) for path in paths))
+    paths, stale = handed_over_rounds(Run(run), role.value)
+    spec = ",".join(str(path) for path in paths)
+    mix_members(spec)  # PolicyError in one line for a mixture pecli would refuse (too many, a comma in a path)
+    if stale:
+        err_console.print(
+            f"note: {run}/{role.value}/average.zip is not yet the mean of these rounds "
+            f"(`pecli selfplay --name {run.name} --zoo {run.parent} --resume` writes it)",
+            highlight=False,
+        )
+    typer.echo("mix:" + spec)
 
 
 @app.command("average")

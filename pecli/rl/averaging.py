@@ -95,8 +95,11 @@ def average_checkpoints(paths: list[Path], out: Path) -> CheckpointMeta:
             if item.filename == POLICY_ENTRY:
                 target.writestr(item, buffer.getvalue())
                 continue
-            with source.open(item) as entry, target.open(item, "w") as copy:  # streamed: the rest as it is
-                shutil.copyfileobj(entry, copy)
+            try:
+                with source.open(item) as entry, target.open(item, "w") as copy:  # streamed: the rest as it is
+                    shutil.copyfileobj(entry, copy)
+            except (zipfile.BadZipFile, RuntimeError, NotImplementedError) as exc:  # bad CRC, encrypted, unknown
+                raise ZooError(f"{paths[-1]}: damaged entry '{item.filename[:100]}' ({exc})") from None
     meta = replace(
         newest, averaged=[str(path) for path in paths], created=datetime.now(UTC).isoformat(timespec="seconds")
     )

@@ -7,6 +7,7 @@ before anything acts on it.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from pecli.io import read_json
 from pecli.policies.registry import builtin_names
 from pecli.records import SelfPlayRecord, Turn, validated
 from pecli.rl import budget
-from pecli.rl.handover import STATE_FILE, averaged_rounds
+from pecli.rl.handover import STATE_FILE, averaged_rounds, stale_averages
 from pecli.rl.pool import LEAGUES, MAIN, OpponentPool
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
@@ -87,18 +88,27 @@ def read_state_file(path: Path) -> SelfPlayState:
     return SelfPlayState.from_record(record)
 
 
-def handed_over_rounds(run: Run, role: Role) -> list[Path]:
+def handed_over_rounds(run: Run, role: Role) -> tuple[list[Path], bool]:
     """The round checkpoints of ``role`` that the self-play ``run`` hands over the mean of (``average.zip``), as
-    its ``selfplay.json`` and ``config.yaml`` say: played as a mixture (``mix:``) instead, each game by one of
-    them. :class:`PecliError` in one line where the run has none."""
+    its ``selfplay.json`` and ``config.yaml`` say, and whether its ``average.zip`` lags them (a stop came between a
+    round's record and its average). :class:`PecliError` in one line where the run has none, or its record names
+    a checkpoint that is missing or lies outside the run (through a link)."""
     state = read_state(run)
-    rounds = averaged_rounds(state.records(), state.curriculum_steps, run.scenario()).get(role)
+    scenario = run.scenario()
+    if not scenario.training.selfplay.average_last:
+        raise PecliError(f"run '{run.name}' hands over no average (its selfplay.average_last is 0)")
+    rounds = averaged_rounds(state.records(), state.curriculum_steps, scenario).get(role)
     if not rounds:
-        raise PecliError(f"run '{run.name}' hands over no {role} yet (no round of it after the curriculum)")
-    paths = [run.path / checkpoint for checkpoint in rounds]  # run-relative, inside the learner's folder
-    if missing := [path for path in paths if not path.is_file()]:
-        raise PecliError(f"run '{run.name}' lacks its round checkpoint {missing[0]}")
-    return paths
+        raise PecliError(f"run '{run.name}' has trained no {role} round yet")
+    room = Path(os.path.realpath(run.path))
+    paths = [run.path / checkpoint for checkpoint in rounds]  # run-relative: <role>/<name>.zip
+    for path in paths:
+        if not path.is_file():
+            raise PecliError(f"run '{run.name}' lacks its round checkpoint {path}")
+        if room not in Path(os.path.realpath(path)).parents:
+            raise PecliError(f"run '{run.name}': {path} leads out of the run; pecli follows no such link")
+    stale = role in stale_averages(run.path, state.records(), state.curriculum_steps, scenario)
+    return paths, stale
 
 
 def checkpoint_name(round: int) -> str:

@@ -218,7 +218,7 @@ class TaskMarker(_Open):
     host: str = Field(default="", max_length=MAX_TEXT)
 
 
-RUN_NAME = r"^[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}$"  # one folder name: a run stays inside its zoo (pecli.zoo)
+RUN_NAME = r"^[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}$"  # one folder name: a run stays inside its zoo (check_run_name)
 _Paths = Annotated[list[Annotated[str, Field(max_length=MAX_TEXT)]], Field(max_length=MAX_ENTRIES)]
 _RunName = Annotated[str, Field(pattern=RUN_NAME)]
 # an experiment's kept.json: run -> role -> checkpoints

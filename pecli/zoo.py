@@ -43,7 +43,7 @@ from pecli import __version__
 from pecli.errors import PecliError
 from pecli.io import atomic_path, atomic_write_json, atomic_write_text, read_json
 from pecli.locks import acquire, release
-from pecli.records import MAX_CPU_SECONDS, JobRecord
+from pecli.records import MAX_CPU_SECONDS, RUN_NAME, JobRecord
 from pecli.roles import Role
 from pecli.scenario import MAX_HISTORY, MAX_STEPS, Scenario, scenario_from_dict
 from pecli.text import shortened
@@ -217,7 +217,7 @@ def command_line() -> str:
     return shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])
 
 
-_RUN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}")
+_RUN_NAME = re.compile(RUN_NAME)
 
 
 def check_run_name(name: str) -> str:

@@ -193,7 +193,7 @@ def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quic
     from pecli.policies import resolve_policy, stored_scenario
 
     run, _ = finished
-    other = tmp_path / "other"
+    other = tmp_path / "at@2" / "other"  # an @ inside a path is no weight
     shutil.copytree(run, other)
     mixture = resolve_policy(f"mix:{run},{other}", "pursuer", quick, seed=0)
     assert isinstance(mixture, MixedPolicy) and mixture.names == [str(run), str(other)]
@@ -203,6 +203,10 @@ def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quic
     assert stored_scenario(f"mix:{run},{other}").fingerprint() == quick.fingerprint()
     played = invoke("play", "-p", f"mix:{run},{other}", "-e", f"mix:{run}/evader/average.zip,greedy", "-n", "8")
     assert played.exit_code == 0, played.output
+    weighed = resolve_policy(f"mix:{run}@3,{other}", "pursuer", quick, seed=0)  # drawn in 3 games of 4
+    assert weighed.weights.tolist() == [0.75, 0.25] and weighed.identity != mixture.identity
+    assert resolve_policy(f"mix:{other}@0.5, {run}@1.5", "pursuer", quick, seed=0).identity == weighed.identity
+    assert resolve_policy(f"mix:{run}@2,{other}@2", "pursuer", quick, seed=0).identity == mixture.identity
 
 
 @pytest.mark.parametrize(
@@ -211,6 +215,11 @@ def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quic
         ("", "separated by commas"),
         ("{run},", "separated by commas"),
         ("{run},{run}", "twice"),
+        ("{run}@2,{run}", "twice"),
+        ("{run}@0,greedy", "positive"),
+        ("{run}@nan,greedy", "positive"),
+        ("{run}@two,greedy", "must be a number"),
+        ("@2,{run}", "before the @"),
         ("{run},nash:x", "does not nest"),
         ("{run}/..", "cannot play pursuer"),
         ("{run}/pursuer/nothere.zip", "not there"),
@@ -256,6 +265,9 @@ def test_rounds_begun_in_the_curriculum_are_not_averaged(quick: Scenario, tmp_pa
         assert averaged == [str(tmp_path / "sp" / role / f"round-00{r}.zip") for r in (2, 3)]
         shown = invoke("zoo", "rounds", str(tmp_path / "sp"), role)  # the same rounds as one mixed player
         assert shown.exit_code == 0 and shown.stdout.strip() == "mix:" + ",".join(averaged)
+        weighed = invoke("zoo", "rounds", str(tmp_path / "sp"), role, "--weight", "3")  # 3 shared by the 2 rounds
+        assert weighed.stdout.strip() == "mix:" + ",".join(f"{path}@1.5" for path in averaged)
+    assert "positive" in invoke("zoo", "rounds", str(tmp_path / "sp"), role, "--weight", "0").output
     played = invoke("play", "-p", shown.stdout.strip().replace("evader", "pursuer"), "-e", shown.stdout.strip())
     assert played.exit_code == 0, played.output
     refused = invoke("zoo", "rounds", str(tmp_path / "sp" / "pursuer"), "pursuer")

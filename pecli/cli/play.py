@@ -32,8 +32,8 @@ EPISODES = 100  # played without --episodes (one with --render to a .gif)
 MAX_BEHAVIOUR = 10_000  # episodes recorded whole for --behaviour
 MAX_FRAMES = 10_000_000  # and their steps in all (a few hundred MB of states)
 POLICY_HELP = (
-    "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, module:Class, "
-    "mix:A,B,... (several players, each game one of them) or nash:FOLDER (a tournament's --nash mixture)."
+    "A built-in name ({names}), hj[:OPTIONS] (see docs/hj.md), a policy file, module:Class, mix:A,B@2,... "
+    "(several players, each game one of them, drawn by weight) or nash:FOLDER (a tournament's --nash mixture)."
 )
 
 

@@ -214,22 +214,36 @@ def best(
 def rounds(
     run: Annotated[Path, typer.Argument(help="A self-play run's folder.", show_default=False)],
     role: Annotated[RoleChoice, typer.Argument(help="The role whose rounds to mix.", show_default=False)],
+    weight: Annotated[
+        float | None,
+        typer.Option(
+            "--weight",
+            help="Share this weight among the rounds (each ends in @W/N), so that runs joined into one mix: "
+            "weigh alike whatever their number of rounds. Default: no weights.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Print the rounds a self-play run hands over the mean of, as one mixed player (a ``mix:`` string).
 
     What a run hands over, ``ROLE/average.zip``, is one network: the mean of its last rounds' weights. The same
     rounds played as a mixture, each game by one of them, are harder for a best response to exploit and a
     little weaker against fixed opponents (docs/benchmarks/exploitability.md). For example:
-    ``pecli exploit "$(pecli zoo rounds zoo/strong pursuer)" --role pursuer -c league``.
+    ``pecli exploit "$(pecli zoo rounds zoo/strong pursuer)" --role pursuer -c league``. Runs of several belief
+    kinds join into one player, each run drawn in a third of the games:
+    ``mix:$(for k in a b c; do pecli zoo rounds zoo/$k pursuer --weight 1 | cut -d: -f2-; done | paste -sd,)``.
     """
-    from pecli.policies.mix import mix_members
+    from pecli.policies.mix import MAX_WEIGHT, mix_members
     from pecli.rl.state import handed_over_rounds
     from pecli.zoo import Run
 
     if not run.is_dir():
         raise PecliError(f"no run at {run}")
+    if weight is not None and not 0 < weight <= MAX_WEIGHT:  # also NaN
+        raise PecliError(f"--weight must be positive and at most {MAX_WEIGHT:g}, got {weight}")
     paths, stale = handed_over_rounds(Run(run), role.value)
-    spec = ",".join(str(path) for path in paths)
+    share = "" if weight is None else f"@{weight / len(paths):.9g}"
+    spec = ",".join(f"{path}{share}" for path in paths)
     mix_members(spec)  # PolicyError in one line for a mixture pecli would refuse (too many, a comma in a path)
     if stale:
         err_console.print(

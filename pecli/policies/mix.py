@@ -1,13 +1,15 @@
-"""``mix:A,B,...``: several players as one, each game played by one member drawn uniformly when it starts.
+"""``mix:A,B,...``: several players as one, each game played by one member drawn when it starts.
 
 A member is a built-in name, a policy file (``.zip``, ``.onnx``, ``.npz``) or a self-play run's folder, which
 stands for what the run hands over for the role asked (``<run>/<role>/average.zip``). So
 ``mix:runs/zoo/a,runs/zoo/b,runs/zoo/c`` plays the pursuers (or evaders) of three runs as one mixed strategy.
+The draw is uniform unless members carry weights: ``mix:runs/zoo/a@2,runs/zoo/b,runs/zoo/c`` draws ``a`` in half
+the games (a member's weight is 1 unless it ends in ``@W``; weights are normalised).
 
 A population of independently trained players is harder to exploit than any one of them: a best response has
 to beat every member with one behaviour, without knowing which it faces, and independent runs leave different
-holes (docs/benchmarks/exploitability.md). This is the uniform meta-strategy over a population; ``nash:FOLDER``
-(:mod:`pecli.policies.nash`) weighs the members by a meta-game instead.
+holes (docs/benchmarks/exploitability.md). Unweighted, this is the uniform meta-strategy over a population;
+``nash:FOLDER`` (:mod:`pecli.policies.nash`) weighs the members by a meta-game.
 """
 
 from __future__ import annotations
@@ -25,22 +27,47 @@ if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
 MAX_MEMBERS = 64
+MAX_WEIGHT = 1e6  # a member drawn a million times as often as another is a typo, not a mixture
 
 
-def mix_members(options: str) -> list[str]:
-    """The member strings of ``mix:OPTIONS``, stripped; :class:`PolicyError` in one line for an empty or
-    oversized list, a repeated member, or a member that is itself a mixture."""
-    members = [part.strip() for part in options.split(",")]
-    if not options.strip() or not all(members):
+def _weighed(part: str) -> tuple[str, float]:
+    """One member of ``mix:`` and its weight: ``A@W`` (``W`` a positive number) or ``A`` (weight 1)."""
+    member, at, tail = part.strip().rpartition("@")
+    if not at or "/" in tail or "\\" in tail:  # no weight; an @ inside a path is the path's
+        return part.strip(), 1.0
+    try:
+        weight = float(tail)
+    except ValueError:
+        raise PolicyError(f"mix: {part.strip()}: a weight after @ must be a number, e.g. runs/zoo/a@2") from None
+    if not 0 < weight <= MAX_WEIGHT:  # also NaN
+        raise PolicyError(f"mix: {part.strip()}: a weight must be positive and at most {MAX_WEIGHT:g}")
+    return member.strip(), weight
+
+
+def mix_weighted(options: str) -> list[tuple[str, float]]:
+    """The members of ``mix:OPTIONS`` with their weights (not normalised), in order; :class:`PolicyError` in one
+    line for an empty or oversized list, a bad weight, a repeated member, or a member that is itself a mixture."""
+    parts = options.split(",")
+    if not options.strip() or not all(part.strip() for part in parts):
         raise PolicyError("mix: needs players separated by commas, e.g. mix:runs/zoo/a,runs/zoo/b,runs/zoo/c")
-    if len(members) > MAX_MEMBERS:
-        raise PolicyError(f"mix: takes at most {MAX_MEMBERS} players, got {len(members)}")
+    if len(parts) > MAX_MEMBERS:
+        raise PolicyError(f"mix: takes at most {MAX_MEMBERS} players, got {len(parts)}")
+    weighted = [_weighed(part) for part in parts]
+    members = [member for member, _ in weighted]
     for member in members:
+        if not member:
+            raise PolicyError("mix: a weight needs its player before the @, e.g. runs/zoo/a@2")
         if member.partition(":")[0] in ("mix", "nash"):
             raise PolicyError(f"mix: {member}: a mixture does not nest another")
     if len(set(members)) != len(members):
-        raise PolicyError("mix: names a player twice; give each once (the draw is uniform)")
-    return members
+        raise PolicyError("mix: names a player twice; give each once (weigh it with @W instead)")
+    return weighted
+
+
+def mix_members(options: str) -> list[str]:
+    """The member strings of ``mix:OPTIONS``, stripped of their weights; :class:`PolicyError` as
+    :func:`mix_weighted`."""
+    return [member for member, _ in mix_weighted(options)]
 
 
 def first_member(spec: str) -> str:
@@ -79,17 +106,22 @@ def member_paths(options: str) -> list[Path]:
 
 
 def load_mix_policy(options: str, role: Role, scenario: Scenario, member: Callable[[str], Policy]) -> Policy:
-    """The ``mix:`` family: ``role``'s uniform mixture of the players in ``options``.
+    """The ``mix:`` family: ``role``'s mixture of the players in ``options``, drawn by their weights.
 
     ``member(spec)`` resolves one member's policy string (a built-in name, a file path, ``module:Class``).
     """
     from pecli.io import file_digest
     from pecli.policies.mixed import MixedPolicy
 
-    specs = mix_members(options)
+    weighted = mix_weighted(options)
+    specs = [spec for spec, _ in weighted]
+    weights = [weight for _, weight in weighted]
     files = [member_file(spec, role) for spec in specs]
     policies = [member(str(file) if file is not None else spec) for spec, file in zip(specs, files)]
-    mixture = MixedPolicy(role, policies, specs)
-    keys = sorted(file_digest(file) if file is not None else f"spec:{spec}" for spec, file in zip(specs, files))
-    mixture.identity = "mix:" + ",".join(keys)  # what a tournament's cache knows it by: its members' content
+    uniform = len(set(weights)) == 1
+    mixture = MixedPolicy(role, policies, specs, None if uniform else weights)
+    keys = [file_digest(file) if file is not None else f"spec:{spec}" for spec, file in zip(specs, files)]
+    if not uniform:  # the same members drawn otherwise are another player
+        keys = [f"{key}@{weight / sum(weights):.9g}" for key, weight in zip(keys, weights)]
+    mixture.identity = "mix:" + ",".join(sorted(keys))  # what a tournament's cache knows it by: its content
     return mixture

@@ -56,6 +56,13 @@ def atomic_write_json(path: str | Path, data: Any) -> None:
     atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
 
 
+def path_inside(path: str | Path, room: str | Path) -> bool:
+    """Whether ``path`` is ``room`` or lies inside it once every link is resolved: a file a record names from a
+    stranger's zoo is read only inside that zoo."""
+    real, home = Path(os.path.realpath(path)), Path(os.path.realpath(room))
+    return real == home or home in real.parents
+
+
 def file_digest(path: str | Path, length: int = 20) -> str:
     """The first ``length`` hex digits of the SHA-256 of a file's content."""
     digest = hashlib.sha256()

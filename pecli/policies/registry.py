@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pecli.errors import PecliError, PolicyError
+from pecli.io import path_inside
 from pecli.policies.adversarial import (
     Blindside,
     Circler,
@@ -205,8 +206,7 @@ def recorded_policy(spec: str, inside: Path | None, source: str) -> str:
             raise PolicyError(f"{source} names the policy file {spec}, which is not there")
         if inside is None:
             return spec
-        real, room = Path(os.path.realpath(path)), Path(os.path.realpath(inside))
-        if real == room or room in real.parents:
+        if path_inside(path, inside):
             return spec
         raise PolicyError(
             f"{source} names the policy file {spec}, outside {inside}: pecli follows no path a record "

@@ -7,13 +7,12 @@ before anything acts on it.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from pecli.errors import PecliError
-from pecli.io import read_json
+from pecli.io import path_inside, read_json
 from pecli.policies.registry import builtin_names
 from pecli.records import SelfPlayRecord, Turn, validated
 from pecli.rl import budget
@@ -100,12 +99,11 @@ def handed_over_rounds(run: Run, role: Role) -> tuple[list[Path], bool]:
     rounds = averaged_rounds(state.records(), state.curriculum_steps, scenario).get(role)
     if not rounds:
         raise PecliError(f"run '{run.name}' has trained no {role} round yet")
-    room = Path(os.path.realpath(run.path))
     paths = [run.path / checkpoint for checkpoint in rounds]  # run-relative: <role>/<name>.zip
     for path in paths:
         if not path.is_file():
             raise PecliError(f"run '{run.name}' lacks its round checkpoint {path}")
-        if room not in Path(os.path.realpath(path)).parents:
+        if not path_inside(path, run.path):
             raise PecliError(f"run '{run.name}': {path} leads out of the run; pecli follows no such link")
     stale = role in stale_averages(run.path, state.records(), state.curriculum_steps, scenario)
     return paths, stale

@@ -70,6 +70,12 @@ def mix_members(options: str) -> list[str]:
     return [member for member, _ in mix_weighted(options)]
 
 
+def player_label(spec: str) -> str:
+    """How a line names a player: a mixture by its size (its members can fill a screen), any other as itself."""
+    family, _, options = spec.strip().partition(":")
+    return f"a mixture of {options.count(',') + 1} players" if family == "mix" else spec
+
+
 def first_member(spec: str) -> str:
     """A policy string itself, or a mixture's first member (what names its group, what a response starts from)."""
     family, _, options = spec.strip().partition(":")

@@ -34,6 +34,7 @@ from pecli.models.extractors import BeliefExtractor
 from pecli.policies import resolve_policy
 from pecli.policies.base import Policy
 from pecli.policies.learned import LearnedPolicy
+from pecli.policies.mix import player_label
 from pecli.progress import PeriodicLines
 from pecli.rl.belief import BeliefBuffer, BeliefVecEnv, FitBelief
 from pecli.rl.callbacks import (
@@ -364,7 +365,9 @@ def train(
     callbacks = [
         FiniteCheck(),
         stats,
-        ProgressDisplay(stats, t.steps, f"{job.role} vs {job.opponent}", enabled=job.progress, lines=lines),
+        ProgressDisplay(
+            stats, t.steps, f"{job.role} vs {player_label(job.opponent)}", enabled=job.progress, lines=lines
+        ),
     ]
     if t.curriculum.enabled and job.role == "pursuer":  # the paper's curriculum eases the pursuer's task
         schedule = job.curriculum_steps or t.steps
@@ -386,7 +389,7 @@ def train(
         def reported(steps: int, cpu: float, rate: float) -> None:
             report(
                 f"{job.name}: {steps:,} steps, {cpu_time(cpu, job.cpu_budget)}, capture rate vs "
-                f"{eval_opponent} {rate:.2f}"
+                f"{player_label(eval_opponent)} {rate:.2f}"
             )
 
         callbacks.append(

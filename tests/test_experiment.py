@@ -811,6 +811,7 @@ def test_each_pairs_responses_train_together_and_the_pair_is_recorded_before_the
         (["--populations"], (True, False, True)),
         (["--populations", "--only-mixtures"], (False, False, True)),
         (["--populations", "--mixtures", "--only-mixtures"], (False, True, True)),
+        (["--steps", "5000"], (True, False, False)),
     ],
 )
 def test_experiment_exploit_flags_choose_runs_mixtures_and_populations(
@@ -819,16 +820,17 @@ def test_experiment_exploit_flags_choose_runs_mixtures_and_populations(
     import pecli.experiment.exploit as experiment_exploit
     import pecli.experiment.report as experiment_report
 
-    asked = []
-    monkeypatch.setattr(
-        experiment_exploit,
-        "exploit_experiment",
-        lambda out, report, runs, mixtures, populations, **settings: asked.append((runs, mixtures, populations)),
-    )
+    asked, budgets = [], []
+
+    def measure(out, report, runs, mixtures, populations, **settings) -> None:
+        asked.append((runs, mixtures, populations))
+        budgets.append((settings["cpu_minutes"], settings["steps"]))
+
+    monkeypatch.setattr(experiment_exploit, "exploit_experiment", measure)
     monkeypatch.setattr(experiment_report, "write_report", lambda out: [])
     result = runner.invoke(app, ["experiment", "exploit", str(tmp_path), *flags])
     assert result.exit_code == 0, result.output
-    assert asked == [chosen]
+    assert asked == [chosen] and budgets == [(20.0, 5000 if "--steps" in flags else None)]
 
 
 def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> None:
@@ -838,6 +840,8 @@ def test_best_responses_need_the_experiments_kept_players(tmp_path: Path) -> Non
     (tmp_path / "out" / "experiment.yaml").write_text(yaml.safe_dump(SMOKE))
     result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out"), "--seeds", "0"])
     assert result.exit_code == 1 and "--seeds" in result.output
+    result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out"), "--steps", "9", "--cpu-minutes", "1"])
+    assert result.exit_code == 1 and "one budget" in result.output
     result = runner.invoke(app, ["experiment", "exploit", str(tmp_path / "out")])
     assert result.exit_code == 1 and "no players kept yet (kept.json)" in result.output
     assert len(result.output.strip().splitlines()) == 1

@@ -411,6 +411,8 @@ class ExperimentReport:
                     "nash_conv_interval": list(pair.interval),
                     "responses": len(pair.against_pursuer.responses) + len(pair.against_evader.responses),
                     "cpu_minutes": pair.against_pursuer.cpu_minutes,
+                    "steps": pair.against_pursuer.steps,
+                    "budget": pair.against_pursuer.budget,
                 }
             )
         return rows
@@ -424,7 +426,7 @@ class ExperimentReport:
             "## Best responses to each run's players",
             "",
             "Each run's kept pursuer and evader against best responses trained on each alone "
-            f"(`pecli experiment exploit`, {rows[0]['cpu_minutes']:g} CPU-minutes each); the strongest response "
+            f"(`pecli experiment exploit`, {rows[0]['budget']} each); the strongest response "
             "counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): 0 for an "
             "equilibrium. 95 % intervals over the held-out games. A run named `…-mixed` is its group's seeds "
             "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`), `population-SCHEDULE-sN` "

@@ -372,17 +372,28 @@ class Controller:
 
 
 class MixedController:
-    """Several exported players as one on a robot: each game draws one member uniformly at :meth:`reset`, and that
-    member plays the whole game (the runtime form of the policy string ``mix:``).
+    """Several exported players as one on a robot: each game draws one member at :meth:`reset`, uniformly or by
+    ``weights``, and that member plays the whole game (the runtime form of the policy string ``mix:``).
 
     Args:
         controllers: the members, every one playing the same role of the same game.
         seed: seed of the draws (each member keeps its own random numbers for a mixed belief).
+        weights: one non-negative weight per member (normalised here; ``mix:A@2,B`` is ``[2, 1]``); default uniform.
     """
 
-    def __init__(self, controllers: Sequence[Controller], seed: int | None = None) -> None:
+    def __init__(
+        self, controllers: Sequence[Controller], seed: int | None = None, weights: Sequence[float] | None = None
+    ) -> None:
         if not controllers:
             raise ExportError("a mixture needs at least one exported player")
+        self.weights: np.ndarray | None = None
+        if weights is not None:
+            w = np.asarray(weights, dtype=np.float64)
+            if w.shape != (len(controllers),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+                raise ExportError(
+                    f"weights must be {len(controllers)} non-negative numbers with a positive sum, got {list(weights)}"
+                )
+            self.weights = w / w.sum()
         first = controllers[0].model
         for controller in controllers[1:]:
             other = controller.model
@@ -397,16 +408,25 @@ class MixedController:
         self.reset()
 
     @classmethod
-    def load(cls, paths: Sequence[str | Path], seed: int | None = None, threads: int = 1) -> MixedController:
-        """A mixture of the exported models at ``paths`` (each with its sidecar beside it)."""
+    def load(
+        cls,
+        paths: Sequence[str | Path],
+        seed: int | None = None,
+        threads: int = 1,
+        weights: Sequence[float] | None = None,
+    ) -> MixedController:
+        """A mixture of the exported models at ``paths`` (each with its sidecar beside it), drawn by ``weights``."""
         members = np.random.default_rng(seed).integers(0, 2**31, size=len(paths)).tolist()
-        return cls([Controller.load(path, int(s), threads) for path, s in zip(paths, members)], seed)
+        return cls([Controller.load(path, int(s), threads) for path, s in zip(paths, members)], seed, weights)
 
     def reset(self, seed: int | None = None) -> None:
         """Start a new game: draw the member that plays it, and reset that member."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-        self.member = int(self.rng.integers(len(self.controllers)))
+        if self.weights is None:
+            self.member = int(self.rng.integers(len(self.controllers)))
+        else:
+            self.member = int(self.rng.choice(len(self.controllers), p=self.weights))
         self.controllers[self.member].reset()
 
     @property

@@ -661,7 +661,7 @@ def test_a_report_of_one_schedules_handed_over_players_lays_each_kind_beside_the
     measured(out / "exploit" / run, kept[run]["pursuer"][0], kept[run]["evader"][0])
     text = ExperimentReport(out).markdown()
     row = f"| {run} | MADDPG | 0.700 | 0.200 [0.057, 0.510] | 0.900 [0.596, 0.982] | 0.700 ["
-    assert "## Best responses to each run's players" in text and row in text
+    assert "## Best responses to each run's players" in text and row in text and "20 CPU-minutes each" in text
     assert "| MADDPG | pursuer | 1 | 0.700 | [0.700, 0.700] |" in text  # one model: an interval of one point
     assert "| MADDPG | evader | 1 | 0.300 | [0.300, 0.300] |" in text  # escapes
 
@@ -717,17 +717,18 @@ def test_the_report_tests_the_papers_ordering_of_each_belief_against_maddpg(tmp_
     assert row["excess_per_game"] == 0 and row["stratified_p"] == pytest.approx(1.0)
 
 
-def measured(folder: Path, pursuer: str, evader: str) -> None:
+def measured(folder: Path, pursuer: str, evader: str, steps: int | None = None) -> None:
     """Records of best responses to a pair, as `pecli exploit --pair` writes them: responses catch 2 and 9 of 10,
-    the pair itself 7 of 10."""
+    the pair itself 7 of 10; of 20 CPU-minutes each, or ``steps`` transitions."""
     from pecli.exploit import ExploitRecord, Response
     from pecli.io import atomic_write_json
 
     for role, target, captures in (("pursuer", pursuer, 2), ("evader", evader, 9)):
         response = Response(arm="fresh", seed=0, captures=captures, episodes=10, cpu_seconds=1, steps=5, checkpoint="")
         record = ExploitRecord(
-            target=target, target_identity=target, role=role, scenario="quick", scenario_hash="h", cpu_minutes=20.0,
-            episodes=10, belief="none", responses={"fresh-s0": response},
+            target=target, target_identity=target, role=role, scenario="quick", scenario_hash="h",
+            cpu_minutes=None if steps else 20.0, steps=steps, episodes=10, belief="none",
+            responses={"fresh-s0": response},
         )  # fmt: skip
         atomic_write_json(folder / f"against-{role}" / "exploit.json", record.model_dump(mode="json"))
     atomic_write_json(folder / "pair.json", {"captures": 7, "episodes": 10})
@@ -741,10 +742,11 @@ def test_a_groups_seeds_are_measured_as_one_mixed_pair(tmp_path: Path) -> None:
     pursuers, evaders = mixed_pairs(out)["none-league-mixed"]
     assert pursuers == "mix:zoo/none-league-s0/pursuer/average.zip,zoo/none-league-s1/pursuer/average.zip"
     assert evaders == "mix:zoo/none-league-s0/evader/average.zip,zoo/none-league-s1/evader/average.zip"
-    measured(out / "exploit" / "none-league-mixed", pursuers, evaders)
+    measured(out / "exploit" / "none-league-mixed", pursuers, evaders, steps=600_000)
     assert list(recorded_pairs(out)) == ["none-league-mixed"]  # no run's own pair measured yet
     (row,) = ExperimentReport(out).best_responses()
     assert (row["run"], row["group"], row["nash_conv"]) == ("none-league-mixed", "MADDPG", pytest.approx(0.7))
+    assert row["budget"] == "600,000 transitions" and "600,000 transitions each" in ExperimentReport(out).markdown()
 
 
 def test_a_seeds_runs_of_every_kind_are_measured_as_one_population(tmp_path: Path) -> None:

@@ -677,6 +677,10 @@ def test_a_mixed_controller_plays_each_game_by_one_member(exports) -> None:
         for _ in range(3):
             assert np.array_equal(mixture.step(own, opponent), alone.step(own, opponent))
     assert drawn == {0, 1}
+    weighed = MixedController.load(models, seed=3, weights=[3, 1])  # as mix:A@3,B: A in three games of four
+    assert sum(weighed.reset() or weighed.member == 0 for _ in range(400)) in range(270, 331)
+    with pytest.raises(ExportError, match="non-negative numbers"):
+        MixedController.load(models, weights=[1, float("nan")])
     with pytest.raises(ExportError, match="one role of one game"):
         MixedController.load([exports["none"][1], exports["evader"][1]])
 

@@ -207,6 +207,9 @@ def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quic
     assert weighed.weights.tolist() == [0.75, 0.25] and weighed.identity != mixture.identity
     assert resolve_policy(f"mix:{other}@0.5, {run}@1.5", "pursuer", quick, seed=0).identity == weighed.identity
     assert resolve_policy(f"mix:{run}@2,{other}@2", "pursuer", quick, seed=0).identity == mixture.identity
+    copied = tmp_path / "run@3"  # a folder whose name ends in @3 is that folder, not a weight
+    shutil.copytree(run, copied)
+    assert resolve_policy(f"mix:{run},{copied}", "pursuer", quick, seed=0).names == [str(run), str(copied)]
 
 
 @pytest.mark.parametrize(
@@ -216,8 +219,9 @@ def test_runs_play_as_one_uniform_mixture(finished: tuple[Path, list[str]], quic
         ("{run},", "separated by commas"),
         ("{run},{run}", "twice"),
         ("{run}@2,{run}", "twice"),
-        ("{run}@0,greedy", "positive"),
-        ("{run}@nan,greedy", "positive"),
+        ("{run}@0,greedy", "must lie between"),
+        ("{run}@nan,greedy", "must lie between"),
+        ("{run}@1e-9,greedy", "must lie between"),
         ("{run}@two,greedy", "must be a number"),
         ("@2,{run}", "before the @"),
         ("{run},nash:x", "does not nest"),
@@ -267,7 +271,7 @@ def test_rounds_begun_in_the_curriculum_are_not_averaged(quick: Scenario, tmp_pa
         assert shown.exit_code == 0 and shown.stdout.strip() == "mix:" + ",".join(averaged)
         weighed = invoke("zoo", "rounds", str(tmp_path / "sp"), role, "--weight", "3")  # 3 shared by the 2 rounds
         assert weighed.stdout.strip() == "mix:" + ",".join(f"{path}@1.5" for path in averaged)
-    assert "positive" in invoke("zoo", "rounds", str(tmp_path / "sp"), role, "--weight", "0").output
+    assert "must lie between" in invoke("zoo", "rounds", str(tmp_path / "sp"), role, "--weight", "0").output
     played = invoke("play", "-p", shown.stdout.strip().replace("evader", "pursuer"), "-e", shown.stdout.strip())
     assert played.exit_code == 0, played.output
     refused = invoke("zoo", "rounds", str(tmp_path / "sp" / "pursuer"), "pursuer")

@@ -308,7 +308,7 @@ def exploit(
         float | None,
         typer.Option(
             "--cpu-minutes",
-            help="CPU-minutes each best response trains (its evaluations included). [default: 20]",
+            help="CPU-minutes each best response trains (its evaluations included). Default: 20.",
             show_default=False,
         ),
     ] = None,
@@ -353,7 +353,7 @@ def exploit(
     workers: Annotated[
         int,
         typer.Option(
-            "--workers", "-w", help="Responses trained at once, each in its own process (each keeps its CPU budget)."
+            "--workers", "-w", help="Responses trained at once, each in its own process (each keeps its budget)."
         ),
     ] = 1,
 ) -> None:
@@ -365,7 +365,8 @@ def exploit(
     any of its members; [bold]--only-mixtures[/] measures those alone, a third of the cost with three seeds.
     [bold]--populations[/] also mixes each seed's runs of every kind (the population one seed of the grid
     trained, as diverse as the grid's kinds); with [bold]--only-mixtures[/], those alone.
-    [bold]--workers[/] trains that many responses at once; stopping is safe and the same command continues.
+    Each response trains [bold]--cpu-minutes[/] or [bold]--steps[/] transitions; [bold]--workers[/] trains
+    that many at once; stopping is safe and the same command continues.
     """
     from pecli.experiment.exploit import exploit_experiment
     from pecli.experiment.report import write_report

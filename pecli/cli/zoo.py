@@ -218,8 +218,8 @@ def rounds(
         float | None,
         typer.Option(
             "--weight",
-            help="Share this weight among the rounds (each ends in @W/N), so that runs joined into one mix: "
-            "weigh alike whatever their number of rounds. Default: no weights.",
+            help="Give each round the weight W/N (N: its number of rounds), so that runs joined into one mix: "
+            "string weigh alike however many rounds each hands over. Default: no weights.",
             show_default=False,
         ),
     ] = None,
@@ -233,14 +233,14 @@ def rounds(
     kinds join into one player, each run drawn in a third of the games:
     ``mix:$(for k in a b c; do pecli zoo rounds zoo/$k pursuer --weight 1 | cut -d: -f2-; done | paste -sd,)``.
     """
-    from pecli.policies.mix import MAX_WEIGHT, mix_members
+    from pecli.policies.mix import check_weight, mix_members
     from pecli.rl.state import handed_over_rounds
     from pecli.zoo import Run
 
     if not run.is_dir():
         raise PecliError(f"no run at {run}")
-    if weight is not None and not 0 < weight <= MAX_WEIGHT:  # also NaN
-        raise PecliError(f"--weight must be positive and at most {MAX_WEIGHT:g}, got {weight}")
+    if weight is not None:
+        check_weight(weight, "--weight")
     paths, stale = handed_over_rounds(Run(run), role.value)
     share = "" if weight is None else f"@{weight / len(paths):.9g}"
     spec = ",".join(f"{path}{share}" for path in paths)

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from pecli.errors import PolicyError
 from pecli.roles import ROLES, Role
+from pecli.text import plural
 from pecli.zoo import AVERAGE_FILE
 
 if TYPE_CHECKING:
@@ -27,20 +28,26 @@ if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
 MAX_MEMBERS = 64
-MAX_WEIGHT = 1e6  # a member drawn a million times as often as another is a typo, not a mixture
+MIN_WEIGHT, MAX_WEIGHT = 1e-6, 1e6  # a weight a million times off 1 is a typo, not a mixture
+
+
+def check_weight(weight: float, what: str) -> None:
+    """:class:`PolicyError` in one line unless ``weight`` lies in [``MIN_WEIGHT``, ``MAX_WEIGHT``] (not NaN)."""
+    if not MIN_WEIGHT <= weight <= MAX_WEIGHT:
+        raise PolicyError(f"{what}: a weight must lie between 0.000001 and 1000000, got {weight}")
 
 
 def _weighed(part: str) -> tuple[str, float]:
-    """One member of ``mix:`` and its weight: ``A@W`` (``W`` a positive number) or ``A`` (weight 1)."""
+    """One member of ``mix:`` and its weight: ``A@W`` (``W`` a positive number) or ``A`` (weight 1). An ``@`` that
+    belongs to a path (``zoo/a@b/run``, or a file or folder that is there) is no weight."""
     member, at, tail = part.strip().rpartition("@")
-    if not at or "/" in tail or "\\" in tail:  # no weight; an @ inside a path is the path's
+    if not at or "/" in tail or "\\" in tail or Path(part.strip()).exists():
         return part.strip(), 1.0
     try:
         weight = float(tail)
     except ValueError:
         raise PolicyError(f"mix: {part.strip()}: a weight after @ must be a number, e.g. runs/zoo/a@2") from None
-    if not 0 < weight <= MAX_WEIGHT:  # also NaN
-        raise PolicyError(f"mix: {part.strip()}: a weight must be positive and at most {MAX_WEIGHT:g}")
+    check_weight(weight, f"mix: {part.strip()}")
     return member.strip(), weight
 
 
@@ -73,7 +80,7 @@ def mix_members(options: str) -> list[str]:
 def player_label(spec: str) -> str:
     """How a line names a player: a mixture by its size (its members can fill a screen), any other as itself."""
     family, _, options = spec.strip().partition(":")
-    return f"a mixture of {options.count(',') + 1} players" if family == "mix" else spec
+    return f"a mixture of {plural(options.count(',') + 1, 'player')}" if family == "mix" else spec
 
 
 def first_member(spec: str) -> str:

@@ -8,7 +8,7 @@ A policy string is one of:
 * a family with options, ``NAME`` or ``NAME:OPTIONS``: ``hj`` (either role; ``hj:FILE.npz``,
   ``hj:model=rel6d``, ``hj:FILE.npz,belief=CHECKPOINT.zip``, see :mod:`pecli.policies.hj`), ``nash``
   (``nash:FOLDER``: the Nash mixture of a zoo that ``pecli tournament --nash`` wrote, see
-  :mod:`pecli.policies.nash`), ``mix`` (``mix:A,B,C``: players or self-play runs as one uniform mixture, see
+  :mod:`pecli.policies.nash`), ``mix`` (``mix:A,B@2,C``: players or self-play runs as one mixture, see
   :mod:`pecli.policies.mix`);
 * ``package.module:ClassName``, a user's class implementing :class:`Policy`; its constructor may
   take any of the keyword arguments ``scenario``, ``role`` and ``seed``;
@@ -119,7 +119,7 @@ def _mixture_member(spec: str, folder: Path) -> str:
 
 
 def _load_mix(options: str, role: Role, scenario: Scenario, seed: int | None) -> Policy:
-    from pecli.policies.mix import load_mix_policy  # several players as one (uniform)
+    from pecli.policies.mix import load_mix_policy  # several players as one
 
     def member(spec: str) -> Policy:
         return resolve_policy(_mixture_member(spec, Path()), role, scenario, seed=seed)

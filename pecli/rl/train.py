@@ -389,7 +389,7 @@ def train(
         def reported(steps: int, cpu: float, rate: float) -> None:
             report(
                 f"{job.name}: {steps:,} steps, {cpu_time(cpu, job.cpu_budget)}, capture rate vs "
-                f"{player_label(eval_opponent)} {rate:.2f}"
+                f"{player_label(eval_opponent)}: {rate:.2f}"
             )
 
         callbacks.append(

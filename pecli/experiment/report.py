@@ -426,10 +426,9 @@ class ExperimentReport:
             "## Best responses to each run's players",
             "",
             "Each run's kept pursuer and evader against best responses trained on each alone "
-            f"(`pecli experiment exploit`, {' or '.join(sorted({r['budget'] for r in rows}))} each); the strongest "
-            "response "
-            "counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): 0 for an "
-            "equilibrium. 95 % intervals over the held-out games. A run named `…-mixed` is its group's seeds "
+            f"(`pecli experiment exploit`, {' or '.join(sorted({r['budget'] for r in rows}))} each); the "
+            "strongest response counts. NashConv = capture(best pursuer, evader) − capture(pursuer, best evader): "
+            "0 for an equilibrium. 95 % intervals over the held-out games. A run named `…-mixed` is its group's seeds "
             "played as one uniform mixture (`mix:`; `pecli experiment exploit --mixtures`), `population-SCHEDULE-sN` "
             "seed N's runs of every kind (`--populations`).",
             "",

@@ -63,8 +63,9 @@ def test_a_short_flag_means_one_option_in_every_command() -> None:
 
 def test_help_shows_a_type_beside_an_option_that_takes_a_value_and_none_beside_a_flag() -> None:
     lines = runner.invoke(app, ["experiment", "exploit", "--help"], env={"COLUMNS": "200"}).stdout.splitlines()
-    (warm,) = (line for line in lines if "--warm" in line)
-    (minutes,) = (line for line in lines if "--cpu-minutes" in line)
+    options = [line.lstrip("│ ") for line in lines if line.startswith("│")]  # the options' rows, not the text
+    (warm,) = (line for line in options if line.startswith("--warm"))
+    (minutes,) = (line for line in options if line.startswith("--cpu-minutes"))
     assert "<" not in warm.split("Also")[0] and "<float>" in minutes
 
 

@@ -22,7 +22,7 @@ from pecli.cli.common import (
     sigterm_stops,
     user_errors,
 )
-from pecli.cli.exploit import responses_stop
+from pecli.cli.exploit import CpuMinutesOption, StepsOption, budget_settings, responses_stop
 from pecli.errors import PecliError
 from pecli.locks import locked
 from pecli.scenario import builtin_experiments
@@ -304,22 +304,8 @@ def report(
 @user_errors
 def exploit(
     out: Annotated[Path, typer.Argument(help="The experiment's folder (its --out).", show_default=False)],
-    cpu_minutes: Annotated[
-        float | None,
-        typer.Option(
-            "--cpu-minutes",
-            help="CPU-minutes each best response trains (its evaluations included). Default: 20.",
-            show_default=False,
-        ),
-    ] = None,
-    steps: Annotated[
-        int | None,
-        typer.Option(
-            "--steps",
-            help="Train each response this many transitions instead: the same budget on every machine.",
-            show_default=False,
-        ),
-    ] = None,
+    cpu_minutes: CpuMinutesOption = None,
+    steps: StepsOption = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Best responses per start and side (seeds 0 .. K-1).")] = 3,
     warm: Annotated[
         bool, typer.Option("--warm", help="Also warm-start each response from the run's own player of its role.")
@@ -374,14 +360,7 @@ def exploit(
     require_batch(episodes, "play fewer")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
-    if cpu_minutes is not None and steps is not None:
-        raise PecliError("give each response one budget: --cpu-minutes or --steps")
-    settings = {
-        "cpu_minutes": 20.0 if cpu_minutes is None else cpu_minutes,
-        "steps": steps,
-        "seeds": tuple(range(seeds)),
-        "episodes": episodes,
-    }
+    settings = {**budget_settings(cpu_minutes, steps), "seeds": tuple(range(seeds)), "episodes": episodes}
 
     def report(line: str) -> None:
         err_console.print(line, highlight=False, markup=False)

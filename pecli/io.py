@@ -63,6 +63,11 @@ def path_inside(path: str | Path, room: str | Path) -> bool:
     return real == home or home in real.parents
 
 
+def text_digest(text: str, length: int = 16) -> str:
+    """The first ``length`` hex digits of the SHA-256 of ``text`` (UTF-8): a short, stable name for content."""
+    return hashlib.sha256(text.encode()).hexdigest()[:length]
+
+
 def file_digest(path: str | Path, length: int = 20) -> str:
     """The first ``length`` hex digits of the SHA-256 of a file's content."""
     digest = hashlib.sha256()

@@ -202,8 +202,14 @@ def write_nash(results: TournamentResults, game: MetaGame, out: Path) -> Path:
 
 def nash_table(game: MetaGame, limit: int | None = None) -> Table:
     """The equilibrium mixture of each side and every player's exploitability within the zoo, the least first."""
+    title = f"the zoo's Nash equilibrium: value {game.value:.3f} (the capture rate each side's mixture guarantees)"
+    if game.slack is not None:
+        title = (
+            f"the zoo's meta-game: value {game.value:.3f}; weights: the most spread mixtures that keep within "
+            f"{game.slack:g} of it"
+        )
     table = Table(
-        title=f"the zoo's Nash equilibrium: value {game.value:.3f} (the capture rate each side's mixture guarantees)",
+        title=title,
         caption="exploitability: how far the zoo's best reply to the player moves its capture rate past "
         "the value (0: the player is an equilibrium strategy)",
     )

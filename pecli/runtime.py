@@ -388,6 +388,7 @@ class MixedController:
             raise ExportError("a mixture needs at least one exported player")
         self.weights: np.ndarray | None = None
         if weights is not None:
+            # pecli.metagame.mixture_weights written out: the runtime imports only the modules a robot copies
             w = np.asarray(weights, dtype=np.float64)
             if w.shape != (len(controllers),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
                 raise ExportError(

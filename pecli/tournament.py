@@ -13,7 +13,6 @@ lock, :mod:`pecli.locks`), and worker processes end with their driver, whatever 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import random
@@ -30,7 +29,7 @@ import numpy as np
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json, file_digest, read_json
+from pecli.io import atomic_write_json, file_digest, read_json, text_digest
 from pecli.locks import locked
 from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
@@ -324,7 +323,7 @@ def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: i
     text = json.dumps(
         [__version__, CACHE_SCHEMA, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)]
     )
-    return hashlib.sha256(text.encode()).hexdigest()[:24]
+    return text_digest(text, 24)
 
 
 def play_pairing(

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 from pecli.errors import PolicyError
-from pecli.metagame import maximin, nash_conv, solve, with_meta_solvers
+from pecli.metagame import max_entropy, maximin, nash_conv, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.scenario import Scenario
 
@@ -180,3 +180,56 @@ def test_a_meta_solver_picks_the_mixture_and_leaves_the_equilibriums_measures() 
     assert game.mixtures_rate == pytest.approx(game.value)
     with pytest.raises(ValueError, match="no meta-solver 'best'"):
         with_meta_solvers(game, "best", "nash")
+
+
+def _entropy(x: np.ndarray) -> float:
+    kept = x[x > 0]
+    return float(-(kept * np.log(kept)).sum())
+
+
+def test_the_maxent_mixture_spreads_over_members_nearly_as_good_and_keeps_its_floor() -> None:
+    # three near-clones and one member that a single evader exploits: the LP picks a vertex, maxent spreads
+    m = np.array([[0.80, 0.80], [0.80, 0.80], [0.79, 0.79], [0.20, 0.95]])
+    game = solve(["a", "b", "c", "d"], ["x", "y"], m)
+    spread = with_meta_solvers(game, "maxent", "maxent", slack=0.05)
+    x = spread.pursuer_mixture
+    assert (x @ m).min() >= game.value - 0.05 - 1e-9  # gives up at most the slack
+    assert x[0] == pytest.approx(x[1], abs=1e-6) and x[2] > 0.2  # clones share alike; the near-clone joins them
+    assert 0.0 < x[3] < 0.1  # the exploited member gets only what the floor leaves
+    assert _entropy(x) > _entropy(game.pursuer_mixture)
+    y = spread.evader_mixture
+    assert (m @ y).max() <= game.value + 0.05 + 1e-9  # the evaders' side concedes at most value + slack
+    assert (spread.pursuer_solver, spread.slack, game.slack) == ("maxent", 0.05, None)
+    assert (spread.value, spread.exploitability()) == (game.value, game.exploitability())
+
+
+def test_maxent_is_uniform_when_the_floor_allows_and_holds_its_floor_on_random_games() -> None:
+    m = np.array([[0.9, 0.1], [0.5, 0.5]])
+    np.testing.assert_allclose(max_entropy(m, 0.0, np.array([0.0, 1.0])), [0.5, 0.5], atol=1e-6)
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        m = rng.uniform(size=(int(rng.integers(1, 9)), int(rng.integers(1, 9))))
+        game = solve([f"p{i}" for i in range(m.shape[0])], [f"e{j}" for j in range(m.shape[1])], m)
+        for slack in (1e-4, 0.05, 0.3):
+            spread = with_meta_solvers(game, "maxent", "maxent", slack=slack)
+            assert (spread.pursuer_mixture @ m).min() >= game.value - slack - 1e-9
+            assert (m @ spread.evader_mixture).max() <= game.value + slack + 1e-9
+            assert spread.pursuer_mixture.sum() == pytest.approx(1.0) and spread.pursuer_mixture.min() >= 0
+            assert _entropy(spread.pursuer_mixture) >= _entropy(game.pursuer_mixture) - 1e-6
+    with pytest.raises(ValueError, match="slack"):
+        with_meta_solvers(game, "maxent", "nash", slack=0.0)
+
+
+def test_tournament_writes_the_maxent_mixture_on_request(played: Path, tmp_path: Path, quick: Scenario) -> None:
+    out = _tournament(played, tmp_path)
+    args = ["tournament", "pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter", "-c", "quick"]
+    args += ["-n", "60", "--seeds", "1", "-w", "1", "--out", str(out), "--resume", "--nash"]
+    result = runner.invoke(app, [*args, "--mixture", "maxent", "--slack", "0.5"])
+    assert result.exit_code == 0, result.output
+    assert "most spread mixtures that keep within 0.5" in " ".join(result.stdout.split())
+    record = json.loads((out / "nash.json").read_text())
+    assert record["solvers"] == {"pursuer": "maxent", "evader": "maxent"} and record["slack"] == 0.5
+    assert len(record["pursuer"]) == 2 and len(record["evader"]) == 3  # a slack of 0.5 leaves room for everyone
+    assert sorted(resolve_policy(f"nash:{out}", "evader", quick, seed=0).names) == ["corner-sitter", "greedy", "hider"]
+    refused = runner.invoke(app, ["tournament", "greedy", "--mixture", "maxent"])
+    assert refused.exit_code == 1 and "add --nash" in refused.output

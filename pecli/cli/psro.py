@@ -20,12 +20,14 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.cli.exploit import responses_stop
+from pecli.metagame import MAXENT_SLACK
 
 
 class MetaSolver(str, Enum):
     """Which mixture of a population the other side's responses train against (pecli.metagame.META_SOLVERS)."""
 
     nash = "nash"
+    maxent = "maxent"
     uniform = "uniform"
     last = "last"
 
@@ -77,7 +79,8 @@ def psro(
         typer.Option(
             "--pursuer-mixture",
             help="The pursuers the evaders' responses train against and that are handed over: the meta-game's "
-            "Nash mixture, all alike (uniform) or the newest alone (last: one network).",
+            f"Nash mixture, the most spread one within {MAXENT_SLACK:g} of its value (maxent), all alike "
+            "(uniform) or the newest alone (last: one network).",
         ),
     ] = MetaSolver.nash,
     evader_mixture: Annotated[

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -20,7 +21,15 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.errors import PecliError
+from pecli.metagame import MAXENT_SLACK
 from pecli.progress import WorkProgress
+
+
+class Mixture(str, Enum):
+    """Which of the meta-game's mixtures ``--nash`` writes (pecli.metagame)."""
+
+    nash = "nash"
+    maxent = "maxent"
 
 
 @user_errors
@@ -76,6 +85,23 @@ def tournament(
             "exploitability within the zoo, and write nash.json (the mixture plays as nash:OUT).",
         ),
     ] = False,
+    mixture: Annotated[
+        Mixture,
+        typer.Option(
+            "--mixture",
+            help="The mixture --nash writes: the equilibrium the LP finds (often a few members), or the most "
+            "spread mixture that keeps within --slack of the game's value (maxent).",
+        ),
+    ] = Mixture.nash,
+    slack: Annotated[
+        float,
+        typer.Option(
+            "--slack",
+            max=1.0,
+            help="The capture rate a maxent mixture may give up against the value (a few hundredths also covers "
+            "the payoffs' sampling error).",
+        ),
+    ] = MAXENT_SLACK,
 ) -> None:
     """Play pursuers against evaders and report capture rate and time-to-capture per pairing.
 
@@ -100,6 +126,10 @@ def tournament(
     require_batch(episodes, "add --seeds instead")
     if nash and sample is not None:
         raise PecliError("--nash needs every pairing: leave out --sample")
+    if not nash and (mixture is not Mixture.nash or slack != MAXENT_SLACK):
+        raise PecliError("--mixture and --slack choose the mixture that --nash writes: add --nash")
+    if slack <= 0.0:
+        raise PecliError(f"--slack must be above 0 (a capture rate the mixture may give up), not {slack:g}")
     if seed is not None and sample is None:
         raise PecliError("--seed seeds the --sample draw only; every pairing plays seeds 0 .. K-1 (--seeds)")
     require_positive(seeds, "--seeds")
@@ -154,6 +184,10 @@ def tournament(
                 )
             written = write_reports(results, out)
             game = results.meta_game() if nash else None
+            if game is not None and mixture is Mixture.maxent:
+                from pecli.metagame import with_meta_solvers
+
+                game = with_meta_solvers(game, "maxent", "maxent", slack)
             if game is not None:
                 written.append(write_nash(results, game, out))
             if as_json:

@@ -26,7 +26,6 @@ belief kinds and empty grids are refused in one line naming the file and the key
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Annotated, Literal
@@ -35,6 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from pecli.belief import BELIEF_KINDS
 from pecli.errors import ConfigError, PecliError
+from pecli.io import text_digest
 from pecli.match import MAX_EPISODES
 from pecli.rl.budget import MAX_CPU_HOURS
 from pecli.roles import Role
@@ -174,7 +174,7 @@ class Experiment(_Model):
         text = json.dumps(
             self.model_dump(mode="json", exclude={"name", "description"}, exclude_defaults=True), sort_keys=True
         )
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return text_digest(text)
 
 
 class RunSpec(BaseModel):

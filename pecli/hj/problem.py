@@ -11,7 +11,6 @@ do not change the value.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import asdict, dataclass
 from functools import cached_property
@@ -19,6 +18,7 @@ from typing import Literal
 
 from pecli.errors import ConfigError
 from pecli.hj.grid import DEFAULT_MODEL, DEFAULT_SIZES, MODELS, Grid, Model, make_grid
+from pecli.io import text_digest
 from pecli.scenario import PointMassAgent, Scenario
 from pecli.text import article
 
@@ -179,4 +179,4 @@ class Problem:
 def _digest(payload: dict) -> str:
     """16 hex digits of the SHA-256 of ``payload`` and the solver's version, as canonical JSON."""
     text = json.dumps({"solver": SOLVER_VERSION, **payload}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return text_digest(text)

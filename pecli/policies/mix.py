@@ -131,7 +131,7 @@ def load_mix_policy(options: str, role: Role, scenario: Scenario, member: Callab
     weights = [weight for _, weight in weighted]
     files = [member_file(spec, role) for spec in specs]
     policies = [member(str(file) if file is not None else spec) for spec, file in zip(specs, files)]
-    uniform = len(set(weights)) == 1
+    uniform = len(set(weights)) == 1  # all alike (no @W, or the same @W everywhere): the unweighted mixture
     mixture = MixedPolicy(role, policies, specs, None if uniform else weights)
     keys = [file_digest(file) if file is not None else f"spec:{spec}" for spec, file in zip(specs, files)]
     if not uniform:  # the same members drawn otherwise are another player

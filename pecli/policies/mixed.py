@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pecli.metagame import mixture_weights
 from pecli.policies.base import Policy
 from pecli.roles import Role
 
@@ -74,12 +75,7 @@ class MixedPolicy:
 
     @weights.setter
     def weights(self, value: Sequence[float]) -> None:
-        w = np.asarray(value, dtype=np.float64)
-        if w.shape != (len(self.members),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-            raise ValueError(
-                f"weights must be {len(self.members)} non-negative numbers with a positive sum, got {value}"
-            )
-        self._weights = w / w.sum()
+        self._weights = mixture_weights(value, len(self.members))
 
     @property
     def game_labels(self) -> list[str]:

@@ -51,6 +51,7 @@ class NashRecord(_Record):
     evader: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
     solvers: dict[Role, MetaSolver] = Field(default_factory=lambda: {"pursuer": "nash", "evader": "nash"})
+    slack: float | None = Field(default=None, gt=0.0, le=1.0)  # a maxent mixture's, below the value
 
 
 def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str]) -> dict:
@@ -70,6 +71,7 @@ def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str])
         "evader": members("evader"),
         "exploitability": game.exploitability(),
         "solvers": {"pursuer": game.pursuer_solver, "evader": game.evader_solver},
+        "slack": game.slack,
     }
 
 

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from pecli.io import text_digest
 from pecli.scenario.training import Training
 from pecli.scenario.values import MAX_DT, MAX_HORIZON, MAX_METRES, MAX_RATE, TWO_PI, Angle, Count, Real, _Model, dotted
 
@@ -166,7 +166,7 @@ class Scenario(_Model):
         """A short hash of everything that changes the game (not the name, description or training)."""
         payload = self.model_dump(exclude={"name", "description", "training"}, mode="json")
         text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return text_digest(text)
 
     def differences(self, other: Scenario) -> list[tuple[str, Any, Any]]:
         """What makes ``other`` another game (what :meth:`fingerprint` covers): ``[(key, ours, theirs)]``,

@@ -34,6 +34,7 @@ from pecli.locks import locked
 from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
+from pecli.policies.mix import mix_members
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.process import die_with, one_torch_thread
 from pecli.roles import ROLES, Role
@@ -49,6 +50,7 @@ from pecli.zoo import (
     read_metadata,
 )
 
+MAX_STRING_NAME = 80  # a longer policy string is named by its size and a digest (string_name)
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
 
 BASELINES: dict[Role, tuple[str, ...]] = {
@@ -268,6 +270,16 @@ def _class_player(spec: str, scenario: Scenario) -> Player:
     raise PecliError(f"'{spec}' plays neither role")
 
 
+def string_name(spec: str) -> str:
+    """How a table names the player of a policy string: the string itself, or past :data:`MAX_STRING_NAME`
+    characters (a mixture of many members) its size and a digest, e.g. ``mix of 22 (1f0c9a2b)``."""
+    if len(spec) <= MAX_STRING_NAME:
+        return spec
+    family, _, options = spec.partition(":")
+    label = f"mix of {len(mix_members(options))}" if family == "mix" else spec[: MAX_STRING_NAME - 12]
+    return f"{label} ({text_digest(spec, 8)})"
+
+
 def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
     """A policy family (``hj``, ``hj:...``) or a policy file other than a checkpoint (an HJ ``.npz``): one
     player for every role it can play, named ``<spec>/<role>``, identified by what decides its play."""
@@ -283,7 +295,7 @@ def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
                 continue
             raise
         identity = getattr(policy, "identity", None) or f"class:{spec}"
-        name = f"{path.stem if path.is_file() else spec}/{role}"
+        name = f"{path.stem if path.is_file() else string_name(spec)}/{role}"
         players.append(Player(name=name, spec=spec, role=role, identity=identity))
     if not players:
         raise PecliError(f"'{spec}' plays neither role")

@@ -12,7 +12,15 @@ from pecli.cli import app
 from pecli.errors import PecliError
 from pecli.process import descendants, live_parents
 from pecli.scenario import Scenario
-from pecli.tournament import Player, find_players, pairing_results, player_spec, run_tournament, schedule
+from pecli.tournament import (
+    Player,
+    find_players,
+    pairing_results,
+    player_spec,
+    run_tournament,
+    schedule,
+    string_name,
+)
 
 runner = CliRunner()
 
@@ -382,3 +390,12 @@ def test_a_seed_without_sample_is_refused_not_ignored(tmp_path: Path) -> None:
     assert result.exit_code == 1 and "--seed seeds the --sample draw only" in result.output, result.output
     negative = runner.invoke(app, ["tournament", "--baselines", "-c", "quick", "-s", "-1", "--sample", "2"])
     assert negative.exit_code == 2  # below the option's minimum
+
+
+def test_a_long_policy_string_is_named_by_its_size_and_a_digest(quick: Scenario) -> None:
+    spec = "mix:pure-pursuit@1." + "0" * 60 + "1,interceptor@2"  # a weight written long: past 80 characters
+    assert len(spec) > 80 and string_name("mix:pure-pursuit,interceptor") == "mix:pure-pursuit,interceptor"
+    name = string_name(spec)
+    assert name.startswith("mix of 2 (") and len(name) < 30 and name != string_name(spec.replace("@2", "@3"))
+    found = find_players([spec, "greedy"], quick)
+    assert [p.name for p in found.players["pursuer"]] == [f"{name}/pursuer"]

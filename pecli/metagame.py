@@ -10,18 +10,18 @@ the value ``v`` of the game. As in PSRO (Lanctot et al. 2017), the same quantiti
   the zoo holds it; an evader's is ``max_i M[i, j] - v``;
 * the NashConv of a pair of mixtures is ``max_i (M y)_i - min_j (x M)_j``: 0 exactly for an equilibrium.
 
-A meta-solver (PSRO's term; OpenSpiel names the same ones) picks the mixture of a population that the other
-side's next best response trains against: ``nash`` the equilibrium's, ``maxent`` the most spread mixture that
-guarantees the value less a slack, ``uniform`` every member alike (fictitious play), ``last`` the newest member
-alone (iterated best response, i.e. self-play of whole players).
+A meta-solver (PSRO's term; OpenSpiel's PSRO has ``nash`` and ``uniform`` too) picks the mixture of a population
+that the other side's next best response trains against: ``nash`` the equilibrium's, ``maxent`` the most spread
+mixture that guarantees the value less a slack, ``uniform`` every member alike (fictitious play), ``last`` the
+newest member alone (iterated best response, i.e. self-play of whole players).
 
 Why ``maxent``: a zero-sum game has many equilibria and the LP returns a vertex, a mixture of few members. Against
 a response trained on the real game, outside the zoo, spreading the weight over every member that is nearly as
 good is safer: the response has to escape more searches at once. The maximum-entropy mixture among those that
 guarantee ``v - slack`` against every column (Balduzzi et al. 2018, "Re-evaluating evaluation", use the
 maximum-entropy Nash equilibrium for the same reason) is found from its dual, a smooth convex problem with
-non-negative multipliers ``l``: the mixture is ``softmax(M l)``. A slack of a few hundredths also covers the
-payoffs' sampling error (200 games measure a capture rate to about ±0.035).
+non-negative multipliers ``l``: the mixture is ``softmax(M l)``. A slack of a few hundredths is of the order of
+the payoffs' sampling error (200 games: a standard error of 0.035 at a capture rate of 0.5).
 
 Everything here is NumPy and SciPy (HiGHS through :func:`scipy.optimize.linprog`), no torch.
 """
@@ -83,7 +83,7 @@ def mixture_weights(weights: Sequence[float], members: int) -> np.ndarray:
     are ``members`` finite, non-negative numbers with a positive sum."""
     w = np.asarray(weights, dtype=np.float64)
     if w.shape != (members,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-        raise ValueError(f"weights must be {members} non-negative numbers with a positive sum, got {list(weights)}")
+        raise ValueError(f"weights must be {members} non-negative numbers with a positive sum, got {w.tolist()}")
     return w / w.sum()
 
 
@@ -134,6 +134,8 @@ def max_entropy(matrix: np.ndarray, floor: float, anchor: np.ndarray) -> np.ndar
     anchor = np.asarray(anchor, dtype=np.float64)
     if anchor.shape != (m.shape[0],):
         raise ValueError("the anchor needs one weight per row")
+    if (anchor @ m).min() < floor - 1e-9:
+        raise ValueError(f"the anchor misses the floor {floor:.3f}: pass a mixture that meets it")
 
     def dual(multipliers: np.ndarray) -> tuple[float, np.ndarray]:
         scores = m @ multipliers
@@ -149,14 +151,15 @@ def max_entropy(matrix: np.ndarray, floor: float, anchor: np.ndarray) -> np.ndar
         options={"maxiter": 10_000, "gtol": 1e-10, "ftol": 1e-15},
     )
     x = softmax(m @ solution.x)
+    x[x < WEIGHT_FLOOR] = 0.0
+    x /= x.sum()
     short = floor - x @ m  # > 0 where the solver's mixture misses the floor
     if short.max() > 0.0:
         margin = anchor @ m - x @ m  # the anchor meets the floor: moving towards it closes the gap
         needed = np.where(short > 0.0, short / np.maximum(margin, 1e-12), 0.0)
         t = min(1.0, float(needed.max()))
         x = (1.0 - t) * x + t * anchor
-    x[x < WEIGHT_FLOOR] = 0.0
-    return x / x.sum()
+    return x
 
 
 def solve(pursuers: Sequence[str], evaders: Sequence[str], matrix: np.ndarray) -> MetaGame:

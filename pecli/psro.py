@@ -32,7 +32,7 @@ from pecli.errors import PecliError
 from pecli.exploit import ExploitJob, ExploitResult, PairResult, exploit_all, pair_result
 from pecli.io import atomic_path, atomic_write_json, read_output_record
 from pecli.locks import locked
-from pecli.metagame import META_SOLVERS, MetaGame, MetaSolver, solve, with_meta_solvers
+from pecli.metagame import MAXENT_SLACK, META_SOLVERS, MetaGame, MetaSolver, solve, with_meta_solvers
 from pecli.policies import resolve_policy
 from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.rl.budget import MAX_CPU_MINUTES, check_cpu_minutes
@@ -102,6 +102,7 @@ class PsroRecord(_Record):
     held_out: int = Field(ge=1, le=10**7)
     pursuer_solver: MetaSolver = "nash"
     evader_solver: MetaSolver = "nash"
+    slack: float | None = Field(default=None, gt=0.0, le=1.0)  # the maxent meta-solver's (None: no maxent)
     iterations: list[Iteration] = Field(default_factory=list, max_length=MAX_ITERATIONS)
 
     def settings(self) -> dict:
@@ -160,6 +161,7 @@ def _fresh_record(job: PsroJob) -> PsroRecord:
         held_out=job.held_out,
         pursuer_solver=job.pursuer_solver,
         evader_solver=job.evader_solver,
+        slack=MAXENT_SLACK if "maxent" in (job.pursuer_solver, job.evader_solver) else None,
     )
 
 

@@ -136,6 +136,9 @@ def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(
         (lambda r: {**r, "pursuer": [{"name": "m", "spec": "nash:elsewhere", "weight": 1.0}]}, "does not nest"),
         (lambda r: {**r, "value": float("nan")}, "not a Nash mixture"),
         (lambda r: {**r, "pursuer": []}, "not a Nash mixture"),
+        (lambda r: {**r, "slack": 0.05}, "a slack goes with a maxent mixture"),
+        (lambda r: {**r, "slack": 0.0, "solvers": {"pursuer": "maxent", "evader": "nash"}}, "not a Nash mixture"),
+        (lambda r: {**r, "slack": None, "solvers": {"pursuer": "maxent", "evader": "nash"}}, "a slack goes with"),
         (lambda r: json.loads("[" * 100_000 + "]" * 100_000), "nested too deep"),
     ],
 )
@@ -233,3 +236,23 @@ def test_tournament_writes_the_maxent_mixture_on_request(played: Path, tmp_path:
     assert sorted(resolve_policy(f"nash:{out}", "evader", quick, seed=0).names) == ["corner-sitter", "greedy", "hider"]
     refused = runner.invoke(app, ["tournament", "greedy", "--mixture", "maxent"])
     assert refused.exit_code == 1 and "add --nash" in refused.output
+    refused = runner.invoke(app, ["tournament", "greedy", "--nash", "--slack", "0.3"])
+    assert refused.exit_code == 1 and "add --mixture maxent" in refused.output
+
+
+def test_maxent_meets_its_floor_when_the_solver_stops_short(monkeypatch: pytest.MonkeyPatch) -> None:
+    import scipy.optimize
+
+    class Stopped:
+        x = np.zeros(2)  # multipliers of 0: the uniform mixture, which misses a floor near the value
+
+    monkeypatch.setattr(scipy.optimize, "minimize", lambda *args, **kwargs: Stopped())
+    m = np.array([[0.9, 0.8], [0.8, 0.9], [0.1, 0.1]])
+    anchor = np.array([0.5, 0.5, 0.0])  # the equilibrium: 0.85 against both
+    x = max_entropy(m, 0.8, anchor)
+    assert (x @ m).min() >= 0.8 - 1e-12 and x.sum() == pytest.approx(1.0)
+    third = np.full(3, 1 / 3)
+    t = (x[2] - third[2]) / (anchor[2] - third[2])  # on the segment from the uniform mixture to the anchor
+    np.testing.assert_allclose(x, (1 - t) * third + t * anchor)
+    with pytest.raises(ValueError, match="anchor misses the floor"):
+        max_entropy(m, 0.9, anchor)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -55,8 +56,8 @@ def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_pa
 
 def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) -> None:
     from pecli.cli.psro import MetaSolver
-    from pecli.metagame import META_SOLVERS
-    from pecli.psro import meta_game, write_mixture
+    from pecli.metagame import MAXENT_SLACK, META_SOLVERS
+    from pecli.psro import _fresh_record, meta_game, write_mixture
 
     assert tuple(choice.value for choice in MetaSolver) == META_SOLVERS  # the command offers every meta-solver
 
@@ -72,6 +73,13 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     assert sorted(m.spec for m in record.evader) == ["greedy", "hider", "rash"]
     assert [m.weight for m in record.evader] == pytest.approx([1 / 3] * 3)
     assert record.solvers == {"pursuer": "last", "evader": "uniform"}  # the file says which mixtures it holds
+    assert record.slack is None and _fresh_record(job).slack is None
+    spread = replace(job, pursuer_solver="maxent")
+    game = meta_game(spread, populations, lambda line: None)  # type: ignore[arg-type]  # the pairings cached above
+    write_mixture(spread, game, populations, tmp_path / "iter-02")  # type: ignore[arg-type]
+    record = read_nash(tmp_path / "iter-02" / "nash.json")
+    assert record.solvers["pursuer"] == "maxent" and record.slack == MAXENT_SLACK
+    assert _fresh_record(spread).slack == MAXENT_SLACK  # a resumed run with another slack would be refused
     with pytest.raises(Exception, match="no meta-solver 'best'"):
         psro(PsroJob("pure-pursuit", "hider", scenario, tmp_path / "p", evader_solver="best"))
 

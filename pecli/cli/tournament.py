@@ -94,14 +94,13 @@ def tournament(
         ),
     ] = Mixture.nash,
     slack: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--slack",
-            max=1.0,
-            help="The capture rate a maxent mixture may give up against the value (a few hundredths also covers "
-            "the payoffs' sampling error).",
+            help="The capture rate the maxent mixture may give up against the value, in (0, 1] "
+            f"(default {MAXENT_SLACK:g}: of the order of the payoffs' sampling error at 200 games).",
         ),
-    ] = MAXENT_SLACK,
+    ] = None,
 ) -> None:
     """Play pursuers against evaders and report capture rate and time-to-capture per pairing.
 
@@ -126,10 +125,12 @@ def tournament(
     require_batch(episodes, "add --seeds instead")
     if nash and sample is not None:
         raise PecliError("--nash needs every pairing: leave out --sample")
-    if not nash and (mixture is not Mixture.nash or slack != MAXENT_SLACK):
-        raise PecliError("--mixture and --slack choose the mixture that --nash writes: add --nash")
-    if slack <= 0.0:
-        raise PecliError(f"--slack must be above 0 (a capture rate the mixture may give up), not {slack:g}")
+    if not nash and mixture is not Mixture.nash:
+        raise PecliError("--mixture chooses the mixture that --nash writes: add --nash")
+    if slack is not None and mixture is not Mixture.maxent:
+        raise PecliError("--slack sets the maxent mixture's slack: add --mixture maxent")
+    if slack is not None and not 0.0 < slack <= 1.0:
+        raise PecliError(f"--slack must be in (0, 1] (a capture rate the mixture may give up), not {slack:g}")
     if seed is not None and sample is None:
         raise PecliError("--seed seeds the --sample draw only; every pairing plays seeds 0 .. K-1 (--seeds)")
     require_positive(seeds, "--seeds")
@@ -187,7 +188,7 @@ def tournament(
             if game is not None and mixture is Mixture.maxent:
                 from pecli.metagame import with_meta_solvers
 
-                game = with_meta_solvers(game, "maxent", "maxent", slack)
+                game = with_meta_solvers(game, "maxent", "maxent", MAXENT_SLACK if slack is None else slack)
             if game is not None:
                 written.append(write_nash(results, game, out))
             if as_json:

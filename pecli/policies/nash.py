@@ -16,7 +16,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pecli.errors import PolicyError
 from pecli.metagame import MetaGame, MetaSolver
@@ -52,6 +52,12 @@ class NashRecord(_Record):
     exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
     solvers: dict[Role, MetaSolver] = Field(default_factory=lambda: {"pursuer": "nash", "evader": "nash"})
     slack: float | None = Field(default=None, gt=0.0, le=1.0)  # a maxent mixture's, below the value
+
+    @model_validator(mode="after")
+    def _slack_with_maxent(self) -> NashRecord:
+        if (self.slack is not None) != ("maxent" in self.solvers.values()):
+            raise ValueError("a slack goes with a maxent mixture, and only with one")
+        return self
 
 
 def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str]) -> dict:

@@ -21,7 +21,7 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.errors import PecliError
-from pecli.metagame import MAXENT_SLACK
+from pecli.metagame import MAXENT_SLACK, with_meta_solvers
 from pecli.progress import WorkProgress
 
 
@@ -186,8 +186,6 @@ def tournament(
             written = write_reports(results, out)
             game = results.meta_game() if nash else None
             if game is not None and mixture is Mixture.maxent:
-                from pecli.metagame import with_meta_solvers
-
                 game = with_meta_solvers(game, "maxent", "maxent", MAXENT_SLACK if slack is None else slack)
             if game is not None:
                 written.append(write_nash(results, game, out))

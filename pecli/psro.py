@@ -1,13 +1,15 @@
 """PSRO over whole players: the double oracle with trained best responses (Lanctot et al. 2017).
 
-Two populations start from the players given (e.g. a league run's handed-over pursuer and evader). Each
+Two populations start from the players given: a league run's handed-over pursuer and evader, or whole zoos
+(e.g. every round of several runs and the evaders a tournament met; ``reuse`` names a tournament whose played
+pairings the first meta-game takes from its cache instead of playing them again). Each
 iteration plays the meta-game of the populations (every pursuer against every evader, cached, so an iteration
 plays only its new members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes each side's
 mixture, by its meta-solver, as ``OUT/iter-NN/nash.json``, a player as ``nash:OUT/iter-NN``: the equilibrium's
 (``nash``, PSRO's double oracle), every member alike (``uniform``, fictitious play) or the newest member alone
 (``last``, iterated best response). Then one best response per role trains against the other side's mixture on
 the real game (:mod:`pecli.exploit`: from scratch, or warm-started from the newest checkpoint of its own
-population), and its held-out games against that mixture measure the mixtures' NashConv,
+population, the last one given or joined), and its held-out games against that mixture measure the mixtures' NashConv,
 ``capture(BR pursuer, evader mixture) - capture(pursuer mixture, BR evader)`` (approximate, as the responses
 are). The strongest response of each role joins its population, and the next iteration solves the larger game.
 
@@ -24,9 +26,10 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pecli.errors import PecliError
 from pecli.exploit import ExploitJob, ExploitResult, PairResult, exploit_all, pair_result
@@ -38,25 +41,29 @@ from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.rl.budget import MAX_CPU_MINUTES, check_cpu_minutes
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.tournament import pairing_results, player_spec
+from pecli.tournament import pairing_results, pairings_cache, player_spec, reuse_pairings
 
 RECORD_FILE = "psro.json"
 CURVE_FILE = "nash-conv.png"
 MAX_ITERATIONS = 100
+MAX_POPULATION = 1000  # members a population may start with
 
 
 @dataclass(frozen=True)
 class PsroJob:
-    """PSRO from the pair ``(pursuer, evader)`` in ``scenario``, into ``out``.
+    """PSRO from the populations ``pursuers`` and ``evaders`` (policy strings or player files, in the order they
+    joined: the last checkpoint is the newest) in ``scenario``, into ``out``.
 
     Each iteration trains ``len(seeds)`` responses per role of ``cpu_minutes`` each (``warm``: from the newest
     checkpoint of the learner's population, where it holds one) against the other side's mixture by its
     meta-solver (``pursuer_solver``, ``evader_solver``: one of :data:`pecli.metagame.META_SOLVERS`), measures them
     in ``held_out`` games against that mixture, and plays every new pairing of the meta-game ``episodes`` times.
+    ``reuse``: a tournament's or another PSRO's folder whose cached pairings the meta-game takes (its games are
+    keyed by everything that decides them, so only identical pairings are reused).
     """
 
-    pursuer: str
-    evader: str
+    pursuers: Sequence[str]
+    evaders: Sequence[str]
     scenario: Scenario
     out: Path
     iterations: int = 3
@@ -68,6 +75,7 @@ class PsroJob:
     workers: int = 1
     pursuer_solver: MetaSolver = "nash"
     evader_solver: MetaSolver = "nash"
+    reuse: Path | None = None
 
 
 class _Record(BaseModel):
@@ -91,8 +99,8 @@ class PsroRecord(_Record):
     """``psro.json``: the start (a re-run must match it) and the iterations finished so far."""
 
     kind: str = Field(default="psro", pattern="^psro$")
-    pursuer: str = Field(max_length=4096)
-    evader: str = Field(max_length=4096)
+    pursuers: list[Annotated[str, Field(max_length=4096)]] = Field(min_length=1, max_length=MAX_POPULATION)
+    evaders: list[Annotated[str, Field(max_length=4096)]] = Field(min_length=1, max_length=MAX_POPULATION)
     scenario: str = Field(max_length=1000)
     scenario_hash: str = Field(max_length=200)
     cpu_minutes: float = Field(gt=0, le=MAX_CPU_MINUTES)
@@ -104,6 +112,17 @@ class PsroRecord(_Record):
     evader_solver: MetaSolver = "nash"
     slack: float | None = Field(default=None, gt=0.0, le=1.0)  # the maxent meta-solver's (None: no maxent)
     iterations: list[Iteration] = Field(default_factory=list, max_length=MAX_ITERATIONS)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_pair(cls, data: Any) -> Any:
+        """A record of pecli 0.11 and before started from one pair: ``pursuer`` and ``evader``."""
+        if isinstance(data, dict) and "pursuers" not in data and "pursuer" in data and "evader" in data:
+            data = {k: v for k, v in data.items() if k not in ("pursuer", "evader")} | {
+                "pursuers": [data["pursuer"]],
+                "evaders": [data["evader"]],
+            }
+        return data
 
     def settings(self) -> dict:
         return self.model_dump(exclude={"iterations"})
@@ -139,9 +158,16 @@ def _check(job: PsroJob) -> None:
 
     if not 1 <= job.episodes <= MAX_EPISODES or not 1 <= job.held_out <= MAX_EPISODES:
         raise PecliError(f"the meta-game's and the held-out games' episodes must be from 1 to {MAX_EPISODES:,}")
-    firsts: dict[Role, str] = {"pursuer": job.pursuer, "evader": job.evader}
-    for role, spec in firsts.items():
-        resolve_policy(spec, role, job.scenario, seed=0)  # plays this game and role, or one line why not
+    firsts: dict[Role, Sequence[str]] = {"pursuer": job.pursuers, "evader": job.evaders}
+    for role, specs in firsts.items():
+        if not 1 <= len(specs) <= MAX_POPULATION:
+            raise PecliError(f"PSRO starts from 1 to {MAX_POPULATION} {role}s, not {len(specs)}")
+        if len({player_spec(spec) for spec in specs}) != len(specs):
+            raise PecliError(f"a {role} is named twice in the population PSRO starts from")
+        for spec in specs:
+            resolve_policy(spec, role, job.scenario, seed=0)  # plays this game and role, or one line why not
+    if job.reuse is not None:
+        pairings_cache(job.reuse)
 
 
 def _read_record(path: Path) -> PsroRecord | None:
@@ -150,8 +176,8 @@ def _read_record(path: Path) -> PsroRecord | None:
 
 def _fresh_record(job: PsroJob) -> PsroRecord:
     return PsroRecord(
-        pursuer=player_spec(job.pursuer),
-        evader=player_spec(job.evader),
+        pursuers=[player_spec(spec) for spec in job.pursuers],
+        evaders=[player_spec(spec) for spec in job.evaders],
         scenario=job.scenario.name,
         scenario_hash=job.scenario.fingerprint(),
         cpu_minutes=job.cpu_minutes,
@@ -203,6 +229,11 @@ def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str
     return path
 
 
+def newest_checkpoint(population: Sequence[str]) -> Path | None:
+    """The last checkpoint (``.zip``) of a population, the one a warm response starts from (``None``: none)."""
+    return next((Path(spec) for spec in reversed(population) if spec.lower().endswith(".zip")), None)
+
+
 def _responses(
     job: PsroJob, folder: Path, populations: dict[Role, list[str]], report: Callable[[str], None]
 ) -> PairResult:
@@ -210,8 +241,7 @@ def _responses(
     and the mixtures' own games: their NashConv."""
     jobs: dict[Role, ExploitJob] = {}
     for role in ROLES:
-        newest = populations[opponent_of(role)][-1]  # the learner's population's newest member
-        start = Path(newest) if job.warm and newest.lower().endswith(".zip") else None
+        start = newest_checkpoint(populations[opponent_of(role)]) if job.warm else None
         jobs[role] = ExploitJob(
             target=f"nash:{folder}",
             role=role,
@@ -240,7 +270,10 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
                 raise PecliError(f"{job.out} holds PSRO from other players or settings; use another --out")
             record = kept
         atomic_write_json(path, record.model_dump(mode="json"))
-        populations: dict[Role, list[str]] = {"pursuer": [job.pursuer], "evader": [job.evader]}
+        populations: dict[Role, list[str]] = {"pursuer": list(job.pursuers), "evader": list(job.evaders)}
+        if job.reuse is not None:
+            copied = reuse_pairings(job.reuse, job.out / "meta-game")
+            report(f"meta-game: {copied} pairing(s) taken from {job.reuse}")
         for done in record.iterations:
             for role, member in done.joined.items():
                 populations[role].append(str(job.out / member))

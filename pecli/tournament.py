@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import re
 import signal
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -29,12 +30,12 @@ import numpy as np
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_write_json, file_digest, read_json, text_digest
+from pecli.io import atomic_path, atomic_write_json, file_digest, read_json, text_digest
 from pecli.locks import locked
 from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
 from pecli.policies import resolve_policy
-from pecli.policies.mix import mix_members
+from pecli.policies.mix import player_label
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.process import die_with, one_torch_thread
 from pecli.roles import ROLES, Role
@@ -50,8 +51,11 @@ from pecli.zoo import (
     read_metadata,
 )
 
-MAX_STRING_NAME = 80  # a longer policy string is named by its size and a digest (string_name)
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
+PAIRINGS_DIR = "pairings"  # a tournament's cache of played pairings, one <key>.json each (pairing_key)
+MAX_PAIRING_BYTES = 1 << 16  # a cached pairing is a few hundred bytes
+KEY_LENGTH = 24  # hex digits of a pairing_key
+_KEY_FILE = re.compile(rf"[0-9a-f]{{{KEY_LENGTH}}}\.json")
 
 BASELINES: dict[Role, tuple[str, ...]] = {
     "pursuer": ("pure-pursuit",),
@@ -182,13 +186,16 @@ def _checkpoint_name(path: Path, meta: CheckpointMeta) -> str:
     return f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
 
 
-def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = False) -> Discovery:
+def find_players(
+    paths: Iterable[str], scenario: Scenario, baselines: bool = False, both_sides: bool = True
+) -> Discovery:
     """Players from zoo folders, run folders, checkpoint files, exported models, ``module:Class`` strings
-    and policy families such as ``hj`` (which join both sides when they play both roles).
+    and policy families such as ``hj`` (which join both sides when they play both roles), in the order named.
 
     A folder contributes every checkpoint with metadata below it, except ``last`` and a run's durable
     state (``resume/``), copies of checkpoints; exported models (``.onnx``) join only when named.
-    Checkpoints of another scenario, and files without metadata, are skipped and listed.
+    Checkpoints of another scenario, and files without metadata, are skipped and listed. With ``both_sides``
+    a side without players is a :class:`PecliError` (else the caller checks).
     """
     players: dict[Role, list[Player]] = {role: [] for role in ROLES}
     skipped: list[str] = []
@@ -200,7 +207,7 @@ def find_players(paths: Iterable[str], scenario: Scenario, baselines: bool = Fal
             if player is not None and player.identity not in {p.identity for p in players[player.role]}:
                 players[player.role].append(player)
     for role in ROLES:
-        if not players[role]:
+        if not players[role] and both_sides:
             hint = "" if baselines else " (add --baselines to include the built-in heuristics)"
             if skipped:
                 hint += f"; {len(skipped)} checkpoint(s) skipped, e.g. {skipped[0]}"
@@ -270,16 +277,6 @@ def _class_player(spec: str, scenario: Scenario) -> Player:
     raise PecliError(f"'{spec}' plays neither role")
 
 
-def string_name(spec: str) -> str:
-    """How a table names the player of a policy string: the string itself, or past :data:`MAX_STRING_NAME`
-    characters (a mixture of many members) its size and a digest, e.g. ``mix of 22 (1f0c9a2b)``."""
-    if len(spec) <= MAX_STRING_NAME:
-        return spec
-    family, _, options = spec.partition(":")
-    label = f"mix of {len(mix_members(options))}" if family == "mix" else spec[: MAX_STRING_NAME - 12]
-    return f"{label} ({text_digest(spec, 8)})"
-
-
 def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
     """A policy family (``hj``, ``hj:...``) or a policy file other than a checkpoint (an HJ ``.npz``): one
     player for every role it can play, named ``<spec>/<role>``, identified by what decides its play."""
@@ -295,7 +292,7 @@ def _policy_players(spec: str, scenario: Scenario) -> list[Player]:
                 continue
             raise
         identity = getattr(policy, "identity", None) or f"class:{spec}"
-        name = f"{path.stem if path.is_file() else string_name(spec)}/{role}"
+        name = f"{path.stem if path.is_file() else player_label(spec)}/{role}"
         players.append(Player(name=name, spec=spec, role=role, identity=identity))
     if not players:
         raise PecliError(f"'{spec}' plays neither role")
@@ -335,7 +332,7 @@ def pairing_key(scenario: Scenario, pursuer: Player, evader: Player, episodes: i
     text = json.dumps(
         [__version__, CACHE_SCHEMA, scenario.fingerprint(), pursuer.identity, evader.identity, episodes, list(seeds)]
     )
-    return text_digest(text, 24)
+    return text_digest(text, KEY_LENGTH)
 
 
 def play_pairing(
@@ -368,7 +365,7 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     if not path.is_file():
         return None
     try:
-        data = read_json(path, "cached pairing", max_bytes=1 << 16)
+        data = read_json(path, "cached pairing", max_bytes=MAX_PAIRING_BYTES)
         result = PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
     except (PecliError, TypeError):
         return None
@@ -384,6 +381,42 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     ):
         return None  # not what a pairing can give: played again
     return result
+
+
+def pairings_cache(folder: Path) -> Path:
+    """The cache of played pairings in ``folder``: a tournament's ``--out`` (``folder/pairings``) or a PSRO folder
+    (``folder/meta-game/pairings``); :class:`PecliError` if it holds neither."""
+    for cache in (folder / PAIRINGS_DIR, folder / "meta-game" / PAIRINGS_DIR):
+        if cache.is_dir():
+            return cache
+    raise PecliError(f"{folder} holds no played pairings (no {PAIRINGS_DIR}/ or meta-game/{PAIRINGS_DIR}/ in it)")
+
+
+def reuse_pairings(source: Path, out: Path) -> int:
+    """Copy the played pairings of the tournament or PSRO folder ``source`` into the cache of ``out`` (a
+    :func:`run_tournament` output) and return how many were new there.
+
+    A pairing's file name is its :func:`pairing_key`, a digest of everything that decides its games, so a copied
+    result is used only by an identical pairing; what it holds is checked when it is read (:func:`_cached`).
+    Only plain files named like a key and of a pairing's size are copied: links and anything else are left.
+    """
+    cache = out / PAIRINGS_DIR
+    cache.mkdir(parents=True, exist_ok=True)
+    copied = 0
+    for path in sorted(pairings_cache(source).iterdir()):
+        target = cache / path.name
+        if (
+            _KEY_FILE.fullmatch(path.name) is None
+            or path.is_symlink()
+            or not path.is_file()
+            or path.stat().st_size > MAX_PAIRING_BYTES
+            or target.exists()
+        ):
+            continue
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(path.read_bytes())
+        copied += 1
+    return copied
 
 
 def _worker_init(driver: int) -> None:
@@ -542,7 +575,7 @@ def run_tournament(
     ``out`` is locked while the tournament runs: :class:`~pecli.locks.FolderLocked` if another process
     is writing it.
     """
-    cache = out / "pairings"
+    cache = out / PAIRINGS_DIR
     cache.mkdir(parents=True, exist_ok=True)
     with locked(out, "tournament output"):
         results: dict[str, PairingResult] = {}

@@ -46,12 +46,14 @@ def test_psro_grows_both_populations_and_measures_each_mixtures_nash_conv(tmp_pa
     pair = read_pair(out / "iter-02")
     assert pair is not None and pair.nash_conv == pytest.approx(iterations[1]["nash_conv"])
     assert (out / "nash-conv.png").stat().st_size > 1000 and read_psro(out) == read_psro(out)
-    other = PsroJob("pure-pursuit", "rash", scenario, out, iterations=2, cpu_minutes=0.015, episodes=10, held_out=20)
+    other = PsroJob(
+        ("pure-pursuit",), ("rash",), scenario, out, iterations=2, cpu_minutes=0.015, episodes=10, held_out=20
+    )
     with pytest.raises(Exception, match="other players or settings"):
         psro(other)
     settings = {"iterations": 2, "cpu_minutes": 0.015, "episodes": 10, "held_out": 20}
     with pytest.raises(Exception, match="other players or settings"):  # another meta-solver is another PSRO
-        psro(PsroJob("pure-pursuit", "hider", scenario, out, pursuer_solver="last", **settings))  # type: ignore[arg-type]
+        psro(PsroJob(("pure-pursuit",), ("hider",), scenario, out, pursuer_solver="last", **settings))  # type: ignore[arg-type]
 
 
 def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) -> None:
@@ -63,7 +65,7 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
 
     scenario = load_scenario(str(tiny))
     job = PsroJob(
-        "pure-pursuit", "hider", scenario, tmp_path, episodes=4, pursuer_solver="last", evader_solver="uniform"
+        ("pure-pursuit",), ("hider",), scenario, tmp_path, episodes=4, pursuer_solver="last", evader_solver="uniform"
     )
     populations = {"pursuer": ["pure-pursuit", "interceptor"], "evader": ["hider", "rash", "greedy"]}
     game = meta_game(job, populations, lambda line: None)  # type: ignore[arg-type]
@@ -81,7 +83,7 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     assert record.solvers["pursuer"] == "maxent" and record.slack == MAXENT_SLACK
     assert _fresh_record(spread).slack == MAXENT_SLACK  # a resumed run with another slack would be refused
     with pytest.raises(Exception, match="no meta-solver 'best'"):
-        psro(PsroJob("pure-pursuit", "hider", scenario, tmp_path / "p", evader_solver="best"))
+        psro(PsroJob(("pure-pursuit",), ("hider",), scenario, tmp_path / "p", evader_solver="best"))
 
 
 @pytest.mark.parametrize(
@@ -89,10 +91,43 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     [
         (["pure-pursuit", "hider", "--iterations", "0"], "--iterations"),
         (["pure-pursuit", "hider", "--cpu-minutes", "inf"], "--cpu-minutes"),
-        (["hider", "pure-pursuit"], "hider"),
+        (["hider", "rash"], "no pursuer among the players"),
+        (["pure-pursuit", "hider", "--reuse", "."], "holds no played pairings"),
         (["pure-pursuit", "missing.zip"], "missing.zip"),
     ],
 )
 def test_mistakes_end_in_one_line(tmp_path: Path, args: list[str], message: str) -> None:
     result = runner.invoke(app, ["psro", *args, "-c", "quick", "--out", str(tmp_path / "p")])
     assert result.exit_code != 0 and message in result.output and "Traceback" not in result.output
+
+
+def test_psro_starts_from_populations_and_takes_a_tournaments_pairings(tmp_path: Path, tiny: Path) -> None:
+    from pecli.psro import PsroRecord, _check, _fresh_record, meta_game, newest_checkpoint
+    from pecli.tournament import reuse_pairings
+
+    tournament = tmp_path / "tournament"
+    played = runner.invoke(
+        app,
+        ["tournament", "pure-pursuit", "interceptor", "hider", "rash", "-c", str(tiny), "-n", "4", "--seeds", "1"]
+        + ["--workers", "1", "--out", str(tournament)],
+    )
+    assert played.exit_code == 0, played.output
+    (tournament / "pairings" / "notes.json").write_text("{}")  # not named like a pairing: left there
+    scenario = load_scenario(str(tiny))
+    populations = {"pursuer": ["pure-pursuit", "interceptor"], "evader": ["hider", "rash"]}
+    job = PsroJob(populations["pursuer"], populations["evader"], scenario, tmp_path / "psro", episodes=4)
+    job = replace(job, reuse=tournament)
+    _check(job)
+    assert reuse_pairings(tournament, job.out / "meta-game") == 4  # the four pairings, not the stray file
+    assert reuse_pairings(tournament, job.out / "meta-game") == 0  # copied once
+    lines: list[str] = []
+    game = meta_game(job, populations, lines.append)  # type: ignore[arg-type]
+    assert lines == [] and game.matrix.shape == (2, 2)  # nothing played again
+    record = _fresh_record(job)
+    assert record.pursuers == ["pure-pursuit", "interceptor"] and record.evaders == ["hider", "rash"]
+    old = record.model_dump(mode="json", exclude={"pursuers", "evaders"}) | {"pursuer": "pure-pursuit", "evader": "x"}
+    assert PsroRecord.model_validate(old).pursuers == ["pure-pursuit"]  # a record from one pair still reads
+    assert newest_checkpoint(["a/round-001.zip", "b/best.zip", "greedy"]) == Path("b/best.zip")
+    assert newest_checkpoint(["greedy"]) is None
+    with pytest.raises(Exception, match="named twice"):
+        _check(replace(job, evaders=["hider", "hider"]))

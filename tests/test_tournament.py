@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from pecli.cli import app
 from pecli.errors import PecliError
+from pecli.policies.mix import player_label
 from pecli.process import descendants, live_parents
 from pecli.scenario import Scenario
 from pecli.tournament import (
@@ -19,7 +20,6 @@ from pecli.tournament import (
     player_spec,
     run_tournament,
     schedule,
-    string_name,
 )
 
 runner = CliRunner()
@@ -394,8 +394,8 @@ def test_a_seed_without_sample_is_refused_not_ignored(tmp_path: Path) -> None:
 
 def test_a_long_policy_string_is_named_by_its_size_and_a_digest(quick: Scenario) -> None:
     spec = "mix:pure-pursuit@1." + "0" * 60 + "1,interceptor@2"  # a weight written long: past 80 characters
-    assert len(spec) > 80 and string_name("mix:pure-pursuit,interceptor") == "mix:pure-pursuit,interceptor"
-    name = string_name(spec)
-    assert name.startswith("mix of 2 (") and len(name) < 30 and name != string_name(spec.replace("@2", "@3"))
+    assert len(spec) > 80 and player_label("mix:pure-pursuit,interceptor") == "mix:pure-pursuit,interceptor"
+    name = player_label(spec)
+    assert name.startswith("mix of 2 (") and len(name) < 30 and name != player_label(spec.replace("@2", "@3"))
     found = find_players([spec, "greedy"], quick)
     assert [p.name for p in found.players["pursuer"]] == [f"{name}/pursuer"]

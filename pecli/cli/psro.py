@@ -1,4 +1,5 @@
-"""``pecli psro``: PSRO from a pursuer–evader pair, trained best responses as the oracle, NashConv per iteration."""
+"""``pecli psro``: PSRO from a pair or from populations, trained best responses as the oracle, NashConv per
+iteration."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from pecli.cli.common import (
     user_errors,
 )
 from pecli.cli.exploit import responses_stop
+from pecli.errors import PecliError
 from pecli.metagame import MAXENT_SLACK
 
 
@@ -57,8 +59,15 @@ def _table(iterations: list) -> Table:  # noqa: ANN001 (pecli.psro loads torch: 
 
 @user_errors
 def psro(
-    pursuer: Annotated[str, typer.Argument(help="The first pursuer: a checkpoint, an export or a policy string.")],
-    evader: Annotated[str, typer.Argument(help="The first evader.")],
+    players: Annotated[
+        list[str],
+        typer.Argument(
+            help="The populations PSRO starts from: at least one pursuer and one evader, each a checkpoint, an "
+            "export, a policy string or a folder of checkpoints (its role is its own; the last checkpoint named "
+            "of a side is its newest).",
+            show_default=False,
+        ),
+    ],
     config: PlayersConfigOption = None,
     iterations: Annotated[int, typer.Option("--iterations", "-i", help="PSRO iterations (a re-run may add more).")] = 3,
     cpu_minutes: Annotated[
@@ -97,11 +106,21 @@ def psro(
     out: Annotated[Path, typer.Option("--out", "-o", help="The PSRO folder (a re-run continues it).")] = Path(
         "runs/psro"
     ),
+    reuse: Annotated[
+        Path | None,
+        typer.Option(
+            "--reuse",
+            help="A tournament's --out or another PSRO folder: its played pairings join the meta-game's cache "
+            "(only identical pairings, same scenario, games and pecli version, are taken).",
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the iterations as JSON.")] = False,
 ) -> None:
-    """PSRO from PURSUER and EVADER: grow both populations with trained best responses until their mixtures
-    are hard to exploit.
+    """PSRO from PLAYERS: grow a population of pursuers and one of evaders with trained best responses until
+    their mixtures are hard to exploit.
 
+    The populations start from a pair (a league run's handed-over players) or from whole zoos (every round of
+    several runs and the evaders a tournament met; [bold]--reuse[/] takes that tournament's played pairings).
     Each iteration plays the populations' meta-game (every pursuer against every evader, [bold]--episodes[/] games,
     cached), solves its Nash equilibrium and writes each side's mixture (the equilibrium's, or by
     [bold]--pursuer-mixture[/] / [bold]--evader-mixture[/]) as OUT/iter-NN/nash.json (a player as
@@ -112,15 +131,23 @@ def psro(
     """
     from pecli.psro import PsroJob, iteration_folder
     from pecli.psro import psro as run_psro
+    from pecli.tournament import find_players
 
     require_batch(episodes, "play fewer")
     require_positive(held_out, "--held-out")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
-    scenario = scenario_for([pursuer, evader], config)
+    scenario = scenario_for(players, config)
+    found = find_players(players, scenario, both_sides=False)
+    for role, members in found.players.items():
+        if not members:
+            why = f" ({len(found.skipped)} checkpoint(s) skipped, e.g. {found.skipped[0]})" if found.skipped else ""
+            raise PecliError(f"no {role} among the players: PSRO starts from at least one of each side{why}")
+    if found.skipped and not as_json:
+        err_console.print(f"skipped {len(found.skipped)} checkpoint(s), e.g. {found.skipped[0]}", markup=False)
     job = PsroJob(
-        pursuer=pursuer,
-        evader=evader,
+        pursuers=tuple(p.spec for p in found.players["pursuer"]),
+        evaders=tuple(p.spec for p in found.players["evader"]),
         scenario=scenario,
         out=out,
         iterations=iterations,
@@ -132,6 +159,7 @@ def psro(
         workers=workers,
         pursuer_solver=pursuer_mixture.value,
         evader_solver=evader_mixture.value,
+        reuse=reuse,
     )
 
     def report(line: str) -> None:

@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pecli.errors import PolicyError
+from pecli.io import text_digest
 from pecli.roles import ROLES, Role
-from pecli.text import plural
 from pecli.zoo import AVERAGE_FILE
 
 if TYPE_CHECKING:
@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
 MAX_MEMBERS = 64
+MAX_LABEL = 80  # a longer policy string is named by its size and a digest (player_label)
 MIN_WEIGHT, MAX_WEIGHT = 1e-6, 1e6  # a weight a million times off 1 is a typo, not a mixture
 
 
@@ -77,10 +78,15 @@ def mix_members(options: str) -> list[str]:
     return [member for member, _ in mix_weighted(options)]
 
 
-def player_label(spec: str) -> str:
-    """How a line names a player: a mixture by its size (its members can fill a screen), any other as itself."""
-    family, _, options = spec.strip().partition(":")
-    return f"a mixture of {plural(options.count(',') + 1, 'player')}" if family == "mix" else spec
+def player_label(spec: str, limit: int = MAX_LABEL) -> str:
+    """How a line or a table names a player: its policy string, or past ``limit`` characters (a mixture of many
+    members) its size and a digest, e.g. ``mix of 22 (1f0c9a2b)``."""
+    spec = spec.strip()
+    if len(spec) <= limit:
+        return spec
+    family, _, options = spec.partition(":")
+    label = f"mix of {len(mix_members(options))}" if family == "mix" else spec[: max(limit - 12, 1)]
+    return f"{label} ({text_digest(spec, 8)})"
 
 
 def first_member(spec: str) -> str:

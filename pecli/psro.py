@@ -41,12 +41,14 @@ from pecli.policies.nash import NASH_FILE, mixture_record
 from pecli.rl.budget import MAX_CPU_MINUTES, check_cpu_minutes
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
-from pecli.tournament import pairing_results, pairings_cache, player_spec, reuse_pairings
+from pecli.tournament import pairing_keys, pairing_results, pairings_cache, player_spec, reuse_pairings
 
 RECORD_FILE = "psro.json"
 CURVE_FILE = "nash-conv.png"
 MAX_ITERATIONS = 100
 MAX_POPULATION = 1000  # members a population may start with
+META_GAME_DIR = "meta-game"  # the meta-game's cache of pairings
+META_SEEDS = (0,)  # the seeds of each meta-game pairing's games (as `pecli tournament --seeds 1`)
 
 
 @dataclass(frozen=True)
@@ -199,8 +201,8 @@ def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable
         populations["pursuer"],
         populations["evader"],
         job.episodes,
-        [0],
-        job.out / "meta-game",
+        META_SEEDS,
+        job.out / META_GAME_DIR,
         job.workers,
         on_result=lambda r, cached: (
             None if cached else report(f"meta-game: {r.pursuer} vs {r.evader}: {r.capture_rate:.3f}")
@@ -214,6 +216,22 @@ def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable
     )
     names = {role: [f"{role}-{k}" for k in range(len(populations[role]))] for role in ROLES}
     return with_meta_solvers(solve(names["pursuer"], names["evader"], matrix), job.pursuer_solver, job.evader_solver)
+
+
+def take_pairings(job: PsroJob, source: Path, populations: dict[Role, list[str]], report: Callable[[str], None]) -> int:
+    """Copy the pairings of the populations' meta-game that the folder ``source`` has played and ``job.out``
+    lacks; report how many, and why none matched when none did."""
+    keys = pairing_keys(job.scenario, populations["pursuer"], populations["evader"], job.episodes, META_SEEDS)
+    copied, lacking = reuse_pairings(source, job.out / META_GAME_DIR, keys)
+    if lacking:
+        hint = (
+            ""
+            if copied
+            else f" (a tournament's pairings match when it was played on {job.scenario.name} with -n "
+            f"{job.episodes} --seeds 1 by this version of pecli)"
+        )
+        report(f"meta-game: {copied} of the {lacking} pairings not yet played taken from {source}{hint}")
+    return copied
 
 
 def write_mixture(job: PsroJob, game: MetaGame, populations: dict[Role, list[str]], folder: Path) -> Path:
@@ -267,13 +285,15 @@ def psro(job: PsroJob, report: Callable[[str], None] = lambda line: None) -> lis
         kept = _read_record(path)
         if kept is not None:
             if kept.settings() != record.settings():
-                raise PecliError(f"{job.out} holds PSRO from other players or settings; use another --out")
+                differ = [key for key, value in record.settings().items() if kept.settings().get(key) != value]
+                raise PecliError(
+                    f"{job.out} holds PSRO from other players or settings (its {', '.join(differ)}); use another --out"
+                )
             record = kept
         atomic_write_json(path, record.model_dump(mode="json"))
         populations: dict[Role, list[str]] = {"pursuer": list(job.pursuers), "evader": list(job.evaders)}
         if job.reuse is not None:
-            copied = reuse_pairings(job.reuse, job.out / "meta-game")
-            report(f"meta-game: {copied} pairing(s) taken from {job.reuse}")
+            take_pairings(job, job.reuse, populations, report)
         for done in record.iterations:
             for role, member in done.joined.items():
                 populations[role].append(str(job.out / member))

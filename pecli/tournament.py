@@ -16,8 +16,8 @@ from __future__ import annotations
 import json
 import os
 import random
-import re
 import signal
+import stat
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -55,7 +55,6 @@ CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games 
 PAIRINGS_DIR = "pairings"  # a tournament's cache of played pairings, one <key>.json each (pairing_key)
 MAX_PAIRING_BYTES = 1 << 16  # a cached pairing is a few hundred bytes
 KEY_LENGTH = 24  # hex digits of a pairing_key
-_KEY_FILE = re.compile(rf"[0-9a-f]{{{KEY_LENGTH}}}\.json")
 
 BASELINES: dict[Role, tuple[str, ...]] = {
     "pursuer": ("pure-pursuit",),
@@ -392,31 +391,45 @@ def pairings_cache(folder: Path) -> Path:
     raise PecliError(f"{folder} holds no played pairings (no {PAIRINGS_DIR}/ or meta-game/{PAIRINGS_DIR}/ in it)")
 
 
-def reuse_pairings(source: Path, out: Path) -> int:
-    """Copy the played pairings of the tournament or PSRO folder ``source`` into the cache of ``out`` (a
-    :func:`run_tournament` output) and return how many were new there.
+def reuse_pairings(source: Path, out: Path, keys: Iterable[str]) -> tuple[int, int]:
+    """Copy the pairings ``keys`` (:func:`pairing_keys`) that ``out``'s cache (a :func:`run_tournament` output)
+    lacks from the played pairings of the tournament or PSRO folder ``source``; return how many were copied and
+    how many were lacking.
 
-    A pairing's file name is its :func:`pairing_key`, a digest of everything that decides its games, so a copied
-    result is used only by an identical pairing; what it holds is checked when it is read (:func:`_cached`).
-    Only plain files named like a key and of a pairing's size are copied: links and anything else are left.
+    A pairing's file name is its key, a digest of everything that decides its games (scenario, players, games,
+    seeds, pecli version), so a copied result is used only by an identical pairing; what it holds is checked
+    when it is read (:func:`_cached`). Only plain files of a pairing's size are read: links, larger files and
+    unreadable ones are left.
     """
     cache = out / PAIRINGS_DIR
     cache.mkdir(parents=True, exist_ok=True)
+    found = pairings_cache(source)
+    lacking = sorted({key for key in keys if not (cache / f"{key}.json").is_file()})
     copied = 0
-    for path in sorted(pairings_cache(source).iterdir()):
-        target = cache / path.name
-        if (
-            _KEY_FILE.fullmatch(path.name) is None
-            or path.is_symlink()
-            or not path.is_file()
-            or path.stat().st_size > MAX_PAIRING_BYTES
-            or target.exists()
-        ):
-            continue
-        with atomic_path(target) as tmp:
-            tmp.write_bytes(path.read_bytes())
-        copied += 1
-    return copied
+    for key in lacking:
+        data = _small_file(found / f"{key}.json", MAX_PAIRING_BYTES)
+        if data is not None:
+            with atomic_path(cache / f"{key}.json") as tmp:
+                tmp.write_bytes(data)
+            copied += 1
+    return copied, len(lacking)
+
+
+def _small_file(path: Path, max_bytes: int) -> bytes | None:
+    """The bytes of ``path`` if it is a plain file (not a link) of at most ``max_bytes``, else ``None``."""
+    try:
+        handle = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(handle).st_mode):
+            return None
+        data = os.read(handle, max_bytes + 1)
+    except OSError:
+        return None
+    finally:
+        os.close(handle)
+    return data if len(data) <= max_bytes else None
 
 
 def _worker_init(driver: int) -> None:
@@ -631,6 +644,33 @@ def player_spec(policy: str | Path) -> str:
     return str(Path(policy).resolve()) if str(policy).lower().endswith(PLAYER_FILES) else str(policy)
 
 
+def _grid_players(
+    scenario: Scenario, pursuers: Sequence[str | Path], evaders: Sequence[str | Path]
+) -> dict[Role, list[Player]]:
+    """The players of :func:`pairing_results`; :class:`PecliError` for one that cannot play its side."""
+    discovery = find_players([str(p) for p in [*pursuers, *evaders]], scenario, baselines=True)
+    found = discovery.players
+    wanted = {"pursuer": {player_spec(p) for p in pursuers}, "evader": {player_spec(e) for e in evaders}}
+    players: dict[Role, list[Player]] = {role: [p for p in found[role] if p.spec in wanted[role]] for role in found}
+    missing = [(spec, role) for role in ROLES for spec in sorted(wanted[role] - {p.spec for p in players[role]})]
+    if missing:
+        why = f" ({discovery.skipped[0]})" if discovery.skipped else ""
+        raise PecliError(f"{missing[0][0]} cannot play {missing[0][1]} in {scenario.name}{why}")
+    return players
+
+
+def pairing_keys(
+    scenario: Scenario,
+    pursuers: Sequence[str | Path],
+    evaders: Sequence[str | Path],
+    episodes: int,
+    seeds: Sequence[int],
+) -> list[str]:
+    """The cache keys of every pursuer against every evader, as :func:`pairing_results` would play them."""
+    players = _grid_players(scenario, pursuers, evaders)
+    return [pairing_key(scenario, p, e, episodes, seeds) for p in players["pursuer"] for e in players["evader"]]
+
+
 def pairing_results(
     scenario: Scenario,
     pursuers: Sequence[str | Path],
@@ -646,14 +686,7 @@ def pairing_results(
     The games are a :func:`run_tournament` cached in ``out`` (a second call plays only new pairings).
     Returns each pairing's result keyed by ``(player_spec(pursuer), player_spec(evader))``.
     """
-    discovery = find_players([str(p) for p in [*pursuers, *evaders]], scenario, baselines=True)
-    found = discovery.players
-    wanted = {"pursuer": {player_spec(p) for p in pursuers}, "evader": {player_spec(e) for e in evaders}}
-    players: dict[Role, list[Player]] = {role: [p for p in found[role] if p.spec in wanted[role]] for role in found}
-    missing = [(spec, role) for role in ROLES for spec in sorted(wanted[role] - {p.spec for p in players[role]})]
-    if missing:
-        why = f" ({discovery.skipped[0]})" if discovery.skipped else ""
-        raise PecliError(f"{missing[0][0]} cannot play {missing[0][1]} in {scenario.name}{why}")
+    players = _grid_players(scenario, pursuers, evaders)
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
     grid = run_tournament(scenario, players, pairings, episodes, seeds, out, workers, on_result).grid()
     return {(p.spec, e.spec): grid[(p.name, e.name)] for p, e in pairings}

@@ -91,7 +91,8 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     [
         (["pure-pursuit", "hider", "--iterations", "0"], "--iterations"),
         (["pure-pursuit", "hider", "--cpu-minutes", "inf"], "--cpu-minutes"),
-        (["hider", "rash"], "no pursuer among the players"),
+        (["hider", "pure-pursuit"], "hider"),  # two players: the pursuer, then the evader
+        (["hider", "rash", "greedy"], "no pursuer among the players"),
         (["pure-pursuit", "hider", "--reuse", "."], "holds no played pairings"),
         (["pure-pursuit", "missing.zip"], "missing.zip"),
     ],
@@ -102,8 +103,7 @@ def test_mistakes_end_in_one_line(tmp_path: Path, args: list[str], message: str)
 
 
 def test_psro_starts_from_populations_and_takes_a_tournaments_pairings(tmp_path: Path, tiny: Path) -> None:
-    from pecli.psro import PsroRecord, _check, _fresh_record, meta_game, newest_checkpoint
-    from pecli.tournament import reuse_pairings
+    from pecli.psro import PsroRecord, _check, _fresh_record, meta_game, newest_checkpoint, take_pairings
 
     tournament = tmp_path / "tournament"
     played = runner.invoke(
@@ -112,22 +112,39 @@ def test_psro_starts_from_populations_and_takes_a_tournaments_pairings(tmp_path:
         + ["--workers", "1", "--out", str(tournament)],
     )
     assert played.exit_code == 0, played.output
-    (tournament / "pairings" / "notes.json").write_text("{}")  # not named like a pairing: left there
     scenario = load_scenario(str(tiny))
-    populations = {"pursuer": ["pure-pursuit", "interceptor"], "evader": ["hider", "rash"]}
+    populations = {"pursuer": ["pure-pursuit", "interceptor"], "evader": ["hider", "rash", "greedy"]}
     job = PsroJob(populations["pursuer"], populations["evader"], scenario, tmp_path / "psro", episodes=4)
     job = replace(job, reuse=tournament)
     _check(job)
-    assert reuse_pairings(tournament, job.out / "meta-game") == 4  # the four pairings, not the stray file
-    assert reuse_pairings(tournament, job.out / "meta-game") == 0  # copied once
     lines: list[str] = []
+    assert take_pairings(job, tournament, populations, lines.append) == 4  # greedy's two were never played
+    assert lines == [f"meta-game: 4 of the 6 pairings not yet played taken from {tournament}"]
+    assert take_pairings(job, tournament, populations, lines.append) == 0 and "0 of the 2" in lines[-1]
+    assert "--seeds 1" in lines[-1]  # why none matched
     game = meta_game(job, populations, lines.append)  # type: ignore[arg-type]
-    assert lines == [] and game.matrix.shape == (2, 2)  # nothing played again
+    assert sum("meta-game: " in line and " vs " in line for line in lines) == 2  # greedy's pairings only
+    assert game.matrix.shape == (2, 3)
     record = _fresh_record(job)
-    assert record.pursuers == ["pure-pursuit", "interceptor"] and record.evaders == ["hider", "rash"]
+    assert record.pursuers == ["pure-pursuit", "interceptor"] and record.evaders == ["hider", "rash", "greedy"]
     old = record.model_dump(mode="json", exclude={"pursuers", "evaders"}) | {"pursuer": "pure-pursuit", "evader": "x"}
     assert PsroRecord.model_validate(old).pursuers == ["pure-pursuit"]  # a record from one pair still reads
     assert newest_checkpoint(["a/round-001.zip", "b/best.zip", "greedy"]) == Path("b/best.zip")
     assert newest_checkpoint(["greedy"]) is None
     with pytest.raises(Exception, match="named twice"):
         _check(replace(job, evaders=["hider", "hider"]))
+    job.out.joinpath("psro.json").write_text(json.dumps(record.model_dump(mode="json")))
+    with pytest.raises(Exception, match=r"other players or settings \(its evaders\)"):
+        psro(replace(job, evaders=["hider", "rash"], iterations=1))
+
+
+def test_pairings_are_taken_only_from_small_plain_files(tmp_path: Path) -> None:
+    from pecli.tournament import _small_file
+
+    (tmp_path / "ok.json").write_text("{}")
+    (tmp_path / "big.json").write_bytes(b" " * 100)
+    (tmp_path / "link.json").symlink_to(tmp_path / "ok.json")
+    assert _small_file(tmp_path / "ok.json", 64) == b"{}"
+    assert _small_file(tmp_path / "big.json", 64) is None
+    assert _small_file(tmp_path / "link.json", 64) is None
+    assert _small_file(tmp_path, 64) is None and _small_file(tmp_path / "missing.json", 64) is None

@@ -47,6 +47,13 @@ def zoo(tmp_path_factory) -> Path:
     return root
 
 
+def test_a_folder_of_checkpoints_plays_their_runs_scenario(zoo: Path) -> None:
+    from pecli.cli.common import scenario_for
+
+    assert scenario_for([str(zoo / "p" / "pursuer")], None, folders=True).name == "quick"  # no config.yaml below
+    assert scenario_for([str(zoo / "p" / "pursuer")], None).name == "paper"  # folders are not looked into
+
+
 def test_empty_and_missing_zoos(tmp_path: Path) -> None:
     result = invoke("zoo", "list", str(tmp_path))
     assert result.exit_code == 0 and "no runs yet" in result.output

@@ -159,7 +159,8 @@ def require_batch(episodes: int, hint: str) -> int:
 
 def scenario_for(players: list[str], config: str | None, folders: bool = False) -> Scenario:
     """The ``--config`` scenario, else the one the first of ``players`` records (a checkpoint's run, an
-    export's sidecar; with ``folders``, the first run found under a folder), else the paper's."""
+    export's sidecar; with ``folders``, the first run found under a folder, else its first checkpoint's), else
+    the paper's."""
     from pecli.policies import stored_scenario
     from pecli.scenario import load_scenario
     from pecli.zoo import Run
@@ -174,4 +175,7 @@ def scenario_for(players: list[str], config: str | None, folders: bool = False) 
             runs = [path] if (path / "config.yaml").is_file() else sorted(p.parent for p in path.rglob("config.yaml"))
             if runs:
                 return Run(runs[0]).scenario()
+            checkpoint = next(iter(sorted(path.rglob("*.zip"))), None)  # a run's role folder: its checkpoints
+            if checkpoint is not None and (scenario := stored_scenario(str(checkpoint))) is not None:
+                return scenario
     return load_scenario("paper")

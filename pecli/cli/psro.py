@@ -23,6 +23,8 @@ from pecli.cli.common import (
 from pecli.cli.exploit import responses_stop
 from pecli.errors import PecliError
 from pecli.metagame import MAXENT_SLACK
+from pecli.roles import Role
+from pecli.scenario import Scenario
 
 
 class MetaSolver(str, Enum):
@@ -38,7 +40,9 @@ def _table(iterations: list) -> Table:  # noqa: ANN001 (pecli.psro loads torch: 
     table = Table(
         title="PSRO: each iteration's mixtures and the best responses to them",
         caption="NashConv = capture(BR pursuer vs evader mixture) − capture(pursuer mixture vs BR evader), 95 % "
-        "interval over the held-out games; value: the two mixtures against each other in the meta-game",
+        "interval over the held-out games; value: the two mixtures against each other in the meta-game; "
+        "pursuer-K, evader-K: member K (from 0) of each population (the players given, then the responses joined; "
+        "OUT/iter-NN/nash.json names their files)",
     )
     for column in ("iteration", "pursuers", "evaders", "value", "BR pursuer", "vs BR evader", "NashConv", "95 %"):
         table.add_column(column, justify="left" if column in ("pursuers", "evaders") else "right", overflow="fold")
@@ -57,14 +61,32 @@ def _table(iterations: list) -> Table:  # noqa: ANN001 (pecli.psro loads torch: 
     return table
 
 
+def _populations(players: list[str], scenario: Scenario, quiet: bool) -> dict[Role, tuple[str, ...]]:
+    """Two players, neither a folder: the pursuer then the evader. More: each joins the side it plays, as a
+    tournament lists them (a checkpoint its own role, a built-in the side it is built for, a folder every
+    checkpoint below it, in sorted order)."""
+    from pecli.tournament import find_players
+
+    if len(players) == 2 and not any(Path(player).is_dir() for player in players):
+        return {"pursuer": (players[0],), "evader": (players[1],)}
+    found = find_players(players, scenario, both_sides=False)
+    for role, members in found.players.items():
+        if not members:
+            why = f" ({len(found.skipped)} checkpoint(s) skipped, e.g. {found.skipped[0]})" if found.skipped else ""
+            raise PecliError(f"no {role} among the players: PSRO starts from at least one of each side{why}")
+    if found.skipped and not quiet:
+        err_console.print(f"skipped {len(found.skipped)} checkpoint(s), e.g. {found.skipped[0]}", markup=False)
+    return {role: tuple(p.spec for p in members) for role, members in found.players.items()}
+
+
 @user_errors
 def psro(
     players: Annotated[
         list[str],
         typer.Argument(
-            help="The populations PSRO starts from: at least one pursuer and one evader, each a checkpoint, an "
-            "export, a policy string or a folder of checkpoints (its role is its own; the last checkpoint named "
-            "of a side is its newest).",
+            help="The populations PSRO starts from: a pursuer and an evader, in that order, or more players, each "
+            "joining the side it plays (a checkpoint, an export, a policy string or a folder of checkpoints); the "
+            "last checkpoint of a side is its newest.",
             show_default=False,
         ),
     ],
@@ -131,23 +153,16 @@ def psro(
     """
     from pecli.psro import PsroJob, iteration_folder
     from pecli.psro import psro as run_psro
-    from pecli.tournament import find_players
 
     require_batch(episodes, "play fewer")
     require_positive(held_out, "--held-out")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
-    scenario = scenario_for(players, config)
-    found = find_players(players, scenario, both_sides=False)
-    for role, members in found.players.items():
-        if not members:
-            why = f" ({len(found.skipped)} checkpoint(s) skipped, e.g. {found.skipped[0]})" if found.skipped else ""
-            raise PecliError(f"no {role} among the players: PSRO starts from at least one of each side{why}")
-    if found.skipped and not as_json:
-        err_console.print(f"skipped {len(found.skipped)} checkpoint(s), e.g. {found.skipped[0]}", markup=False)
+    scenario = scenario_for(players, config, folders=True)
+    populations = _populations(players, scenario, quiet=as_json)
     job = PsroJob(
-        pursuers=tuple(p.spec for p in found.players["pursuer"]),
-        evaders=tuple(p.spec for p in found.players["evader"]),
+        pursuers=populations["pursuer"],
+        evaders=populations["evader"],
         scenario=scenario,
         out=out,
         iterations=iterations,

@@ -79,13 +79,13 @@ def mix_members(options: str) -> list[str]:
 
 
 def player_label(spec: str, limit: int = MAX_LABEL) -> str:
-    """How a line or a table names a player: its policy string, or past ``limit`` characters (a mixture of many
-    members) its size and a digest, e.g. ``mix of 22 (1f0c9a2b)``."""
+    """How a line or a table names a player: its policy string, or past ``limit`` characters a mixture by its size
+    and a digest, e.g. ``mix of 22 (1f0c9a2b)``, anything else by its end (a file's name) and a digest."""
     spec = spec.strip()
     if len(spec) <= limit:
         return spec
     family, _, options = spec.partition(":")
-    label = f"mix of {len(mix_members(options))}" if family == "mix" else spec[: max(limit - 12, 1)]
+    label = f"mix of {len(mix_members(options))}" if family == "mix" else "…" + spec[-max(limit - 13, 1) :]
     return f"{label} ({text_digest(spec, 8)})"
 
 

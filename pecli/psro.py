@@ -78,6 +78,7 @@ class PsroJob:
     pursuer_solver: MetaSolver = "nash"
     evader_solver: MetaSolver = "nash"
     reuse: Path | None = None
+    slack: float = MAXENT_SLACK  # what a maxent meta-solver gives up against the meta-game's value
 
 
 class _Record(BaseModel):
@@ -151,6 +152,8 @@ def _check(job: PsroJob) -> None:
     if not 1 <= job.iterations <= MAX_ITERATIONS:
         raise PecliError(f"--iterations must be from 1 to {MAX_ITERATIONS}, not {job.iterations}")
     check_cpu_minutes(job.cpu_minutes)
+    if not 0.0 < job.slack <= 1.0:
+        raise PecliError(f"the maxent mixture's slack must be in (0, 1], not {job.slack:g}")
     for solver in (job.pursuer_solver, job.evader_solver):
         if solver not in META_SOLVERS:
             raise PecliError(f"no meta-solver '{solver}' (known: {', '.join(META_SOLVERS)})")
@@ -189,7 +192,7 @@ def _fresh_record(job: PsroJob) -> PsroRecord:
         held_out=job.held_out,
         pursuer_solver=job.pursuer_solver,
         evader_solver=job.evader_solver,
-        slack=MAXENT_SLACK if "maxent" in (job.pursuer_solver, job.evader_solver) else None,
+        slack=job.slack if "maxent" in (job.pursuer_solver, job.evader_solver) else None,
     )
 
 
@@ -215,7 +218,8 @@ def meta_game(job: PsroJob, populations: dict[Role, list[str]], report: Callable
         ]
     )
     names = {role: [f"{role}-{k}" for k in range(len(populations[role]))] for role in ROLES}
-    return with_meta_solvers(solve(names["pursuer"], names["evader"], matrix), job.pursuer_solver, job.evader_solver)
+    game = solve(names["pursuer"], names["evader"], matrix)
+    return with_meta_solvers(game, job.pursuer_solver, job.evader_solver, job.slack)
 
 
 def take_pairings(job: PsroJob, source: Path, populations: dict[Role, list[str]], report: Callable[[str], None]) -> int:

@@ -82,6 +82,7 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
     record = read_nash(tmp_path / "iter-02" / "nash.json")
     assert record.solvers["pursuer"] == "maxent" and record.slack == MAXENT_SLACK
     assert _fresh_record(spread).slack == MAXENT_SLACK  # a resumed run with another slack would be refused
+    assert _fresh_record(replace(spread, slack=0.1)).slack == 0.1
     with pytest.raises(Exception, match="no meta-solver 'best'"):
         psro(PsroJob(("pure-pursuit",), ("hider",), scenario, tmp_path / "p", evader_solver="best"))
 
@@ -92,6 +93,8 @@ def test_each_sides_mixture_follows_its_meta_solver(tmp_path: Path, tiny: Path) 
         (["pure-pursuit", "hider", "--iterations", "0"], "--iterations"),
         (["pure-pursuit", "hider", "--cpu-minutes", "inf"], "--cpu-minutes"),
         (["hider", "pure-pursuit"], "hider"),  # two players: the pursuer, then the evader
+        (["pure-pursuit", "hider", "--slack", "0.1"], "add --pursuer-mixture maxent"),
+        (["pure-pursuit", "hider", "--evader-mixture", "maxent", "--slack", "2"], "--slack must be in (0, 1]"),
         (["hider", "rash", "greedy"], "no pursuer among the players"),
         (["pure-pursuit", "hider", "--reuse", "."], "holds no played pairings"),
         (["pure-pursuit", "missing.zip"], "missing.zip"),

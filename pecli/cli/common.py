@@ -157,6 +157,20 @@ def require_batch(episodes: int, hint: str) -> int:
     return episodes
 
 
+def maxent_slack(slack: float | None, maxent: bool, hint: str) -> float:
+    """The maxent mixture's slack that ``--slack`` sets (its default if unset); one line if it is set where no
+    side is maxent (``hint`` says what to add) or outside (0, 1]."""
+    from pecli.metagame import MAXENT_SLACK
+
+    if slack is None:
+        return MAXENT_SLACK
+    if not maxent:
+        raise PecliError(f"--slack sets the maxent mixture's slack: {hint}")
+    if not 0.0 < slack <= 1.0:
+        raise PecliError(f"--slack must be in (0, 1] (a capture rate the mixture may give up), not {slack:g}")
+    return slack
+
+
 def scenario_for(players: list[str], config: str | None, folders: bool = False) -> Scenario:
     """The ``--config`` scenario, else the one the first of ``players`` records (a checkpoint's run, an
     export's sidecar; with ``folders``, the first run found under a folder, else its first checkpoint's), else

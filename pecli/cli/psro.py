@@ -15,6 +15,7 @@ from pecli.cli.common import (
     PlayersConfigOption,
     console,
     err_console,
+    maxent_slack,
     require_batch,
     require_positive,
     scenario_for,
@@ -110,7 +111,7 @@ def psro(
         typer.Option(
             "--pursuer-mixture",
             help="The pursuers the evaders' responses train against and that are handed over: the meta-game's "
-            f"Nash mixture, the most spread one within {MAXENT_SLACK:g} of its value (maxent), all alike "
+            "Nash mixture, the most spread one within --slack of its value (maxent), all alike "
             "(uniform) or the newest alone (last: one network).",
         ),
     ] = MetaSolver.nash,
@@ -118,6 +119,14 @@ def psro(
         MetaSolver,
         typer.Option("--evader-mixture", help="The same for the evaders that the pursuers' responses train against."),
     ] = MetaSolver.nash,
+    slack: Annotated[
+        float | None,
+        typer.Option(
+            "--slack",
+            help="The capture rate a maxent mixture may give up against the meta-game's value, in (0, 1] "
+            f"(default {MAXENT_SLACK:g}).",
+        ),
+    ] = None,
     episodes: Annotated[int, typer.Option("--episodes", "-n", help="Games per pairing of the meta-game.")] = 200,
     held_out: Annotated[
         int, typer.Option("--held-out", help="Held-out games of each best response against the mixture.")
@@ -158,6 +167,8 @@ def psro(
     require_positive(held_out, "--held-out")
     require_positive(seeds, "--seeds")
     require_positive(workers, "--workers")
+    maxent = MetaSolver.maxent in (pursuer_mixture, evader_mixture)
+    spread = maxent_slack(slack, maxent, "add --pursuer-mixture maxent or --evader-mixture maxent")
     scenario = scenario_for(players, config, folders=True)
     populations = _populations(players, scenario, quiet=as_json)
     job = PsroJob(
@@ -175,6 +186,7 @@ def psro(
         pursuer_solver=pursuer_mixture.value,
         evader_solver=evader_mixture.value,
         reuse=reuse,
+        slack=spread,
     )
 
     def report(line: str) -> None:

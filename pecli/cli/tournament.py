@@ -13,6 +13,7 @@ import typer
 from pecli.cli.common import (
     console,
     err_console,
+    maxent_slack,
     one_torch_thread,
     require_batch,
     require_positive,
@@ -127,10 +128,7 @@ def tournament(
         raise PecliError("--nash needs every pairing: leave out --sample")
     if not nash and mixture is not Mixture.nash:
         raise PecliError("--mixture chooses the mixture that --nash writes: add --nash")
-    if slack is not None and mixture is not Mixture.maxent:
-        raise PecliError("--slack sets the maxent mixture's slack: add --mixture maxent")
-    if slack is not None and not 0.0 < slack <= 1.0:
-        raise PecliError(f"--slack must be in (0, 1] (a capture rate the mixture may give up), not {slack:g}")
+    spread = maxent_slack(slack, mixture is Mixture.maxent, "add --mixture maxent")
     if seed is not None and sample is None:
         raise PecliError("--seed seeds the --sample draw only; every pairing plays seeds 0 .. K-1 (--seeds)")
     require_positive(seeds, "--seeds")
@@ -186,7 +184,7 @@ def tournament(
             written = write_reports(results, out)
             game = results.meta_game() if nash else None
             if game is not None and mixture is Mixture.maxent:
-                game = with_meta_solvers(game, "maxent", "maxent", MAXENT_SLACK if slack is None else slack)
+                game = with_meta_solvers(game, "maxent", "maxent", spread)
             if game is not None:
                 written.append(write_nash(results, game, out))
             if as_json:

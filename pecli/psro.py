@@ -2,16 +2,17 @@
 
 Two populations start from the players given: a league run's handed-over pursuer and evader, or whole zoos
 (e.g. every round of several runs and the evaders a tournament met; ``reuse`` names a tournament whose played
-pairings the first meta-game takes from its cache instead of playing them again). Each
-iteration plays the meta-game of the populations (every pursuer against every evader, cached, so an iteration
-plays only its new members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes each side's
+pairings the first meta-game takes from its cache instead of playing them again). Each iteration plays the
+meta-game of the populations (every pursuer against every evader, cached, so an iteration plays only its new
+members' pairings), solves its Nash equilibrium (:mod:`pecli.metagame`) and writes each side's
 mixture, by its meta-solver, as ``OUT/iter-NN/nash.json``, a player as ``nash:OUT/iter-NN``: the equilibrium's
 (``nash``, PSRO's double oracle), every member alike (``uniform``, fictitious play) or the newest member alone
 (``last``, iterated best response). Then one best response per role trains against the other side's mixture on
 the real game (:mod:`pecli.exploit`: from scratch, or warm-started from the newest checkpoint of its own
-population, the last one given or joined), and its held-out games against that mixture measure the mixtures' NashConv,
-``capture(BR pursuer, evader mixture) - capture(pursuer mixture, BR evader)`` (approximate, as the responses
-are). The strongest response of each role joins its population, and the next iteration solves the larger game.
+population, the last one given or joined), and its held-out games against that mixture measure the mixtures'
+NashConv, ``capture(BR pursuer, evader mixture) - capture(pursuer mixture, BR evader)`` (approximate, as the
+responses are). The strongest response of each role joins its population, and the next iteration solves the
+larger game.
 
 NashConv per iteration is what PSRO drives down; the last iteration's mixture is the player to hand over (with
 ``last``, one network: the newest member). The output folder holds ``psro.json`` (the job and every finished

@@ -17,7 +17,6 @@ import json
 import os
 import random
 import signal
-import stat
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -30,7 +29,7 @@ import numpy as np
 
 from pecli import __version__
 from pecli.errors import PecliError
-from pecli.io import atomic_path, atomic_write_json, file_digest, read_json, text_digest
+from pecli.io import atomic_write_json, file_digest, read_json, text_digest
 from pecli.locks import locked
 from pecli.match import play_match
 from pecli.metagame import MetaGame, solve
@@ -398,8 +397,8 @@ def reuse_pairings(source: Path, out: Path, keys: Iterable[str]) -> tuple[int, i
 
     A pairing's file name is its key, a digest of everything that decides its games (scenario, players, games,
     seeds, pecli version), so a copied result is used only by an identical pairing; what it holds is checked
-    when it is read (:func:`_cached`). Only plain files of a pairing's size are read: links, larger files and
-    unreadable ones are left.
+    when it is read (:func:`_cached`). Files are read as a pairing's JSON, bounded in size; links and files
+    that are no such JSON are left.
     """
     cache = out / PAIRINGS_DIR
     cache.mkdir(parents=True, exist_ok=True)
@@ -407,29 +406,16 @@ def reuse_pairings(source: Path, out: Path, keys: Iterable[str]) -> tuple[int, i
     lacking = sorted({key for key in keys if not (cache / f"{key}.json").is_file()})
     copied = 0
     for key in lacking:
-        data = _small_file(found / f"{key}.json", MAX_PAIRING_BYTES)
-        if data is not None:
-            with atomic_path(cache / f"{key}.json") as tmp:
-                tmp.write_bytes(data)
-            copied += 1
+        path = found / f"{key}.json"
+        if path.is_symlink() or not path.exists():
+            continue
+        try:
+            data = read_json(path, "cached pairing", max_bytes=MAX_PAIRING_BYTES)
+        except PecliError:
+            continue  # damaged or too large: played again
+        atomic_write_json(cache / f"{key}.json", data)
+        copied += 1
     return copied, len(lacking)
-
-
-def _small_file(path: Path, max_bytes: int) -> bytes | None:
-    """The bytes of ``path`` if it is a plain file (not a link) of at most ``max_bytes``, else ``None``."""
-    try:
-        handle = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-    except OSError:
-        return None
-    try:
-        if not stat.S_ISREG(os.fstat(handle).st_mode):
-            return None
-        data = os.read(handle, max_bytes + 1)
-    except OSError:
-        return None
-    finally:
-        os.close(handle)
-    return data if len(data) <= max_bytes else None
 
 
 def _worker_init(driver: int) -> None:

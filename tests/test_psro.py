@@ -141,13 +141,18 @@ def test_psro_starts_from_populations_and_takes_a_tournaments_pairings(tmp_path:
         psro(replace(job, evaders=["hider", "rash"], iterations=1))
 
 
-def test_pairings_are_taken_only_from_small_plain_files(tmp_path: Path) -> None:
-    from pecli.tournament import _small_file
+def test_pairings_are_taken_only_from_small_json_files(tmp_path: Path) -> None:
+    from pecli.tournament import MAX_PAIRING_BYTES, reuse_pairings
 
-    (tmp_path / "ok.json").write_text("{}")
-    (tmp_path / "big.json").write_bytes(b" " * 100)
-    (tmp_path / "link.json").symlink_to(tmp_path / "ok.json")
-    assert _small_file(tmp_path / "ok.json", 64) == b"{}"
-    assert _small_file(tmp_path / "big.json", 64) is None
-    assert _small_file(tmp_path / "link.json", 64) is None
-    assert _small_file(tmp_path, 64) is None and _small_file(tmp_path / "missing.json", 64) is None
+    source = tmp_path / "source" / "pairings"
+    source.mkdir(parents=True)
+    (source / "aa.json").write_text('{"episodes": 4}')
+    (source / "bb.json").write_text(" " * (MAX_PAIRING_BYTES + 1))  # too large
+    (source / "cc.json").write_text("not json")
+    (source / "dd.json").symlink_to(source / "aa.json")
+    (source / "ee").mkdir()
+    (source / "ee.json").mkdir()  # not a file
+    out = tmp_path / "out"
+    assert reuse_pairings(tmp_path / "source", out, ["aa", "bb", "cc", "dd", "ee", "ff"]) == (1, 6)
+    assert json.loads((out / "pairings" / "aa.json").read_text()) == {"episodes": 4}
+    assert sorted(p.name for p in (out / "pairings").iterdir()) == ["aa.json"]

@@ -28,7 +28,6 @@ What a belief adds to capture, in the curve runs (c) and in self-play (d): ``ben
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -76,6 +75,9 @@ def speed(args: argparse.Namespace) -> None:
 
 
 def league(args: argparse.Namespace) -> None:
+    from pecli.rl.handover import STATE_FILE
+    from pecli.rl.state import read_state_file
+
     warmups = ["learning_starts=1000", "belief_settings.warmup=1000"]
     seconds: dict[str, list[float]] = {kind: [] for kind in args.kinds}
     last: dict[str, list[float]] = {kind: [] for kind in args.kinds}
@@ -90,9 +92,9 @@ def league(args: argparse.Namespace) -> None:
                 command += [part for item in sets for part in ("--set", item)]
                 env = {**os.environ, "PYTHONPATH": str(ROOT)}
                 subprocess.run(command, check=True, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
-                turns = json.loads((Path(zoo) / name / "selfplay.json").read_text())["turns"]
-                seconds[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns) / args.rounds)
-                last[kind].append(sum(float(turn["cpu_seconds"]) for turn in turns[-2:]))  # one turn per side
+                turns = read_state_file(Path(zoo) / name / STATE_FILE).turns
+                seconds[kind].append(sum(turn.cpu_seconds for turn in turns) / args.rounds)
+                last[kind].append(sum(turn.cpu_seconds for turn in turns[-2:]))  # one turn per side
                 print(f"{kind}: {seconds[kind][-1]:.1f} CPU-s per round, last {last[kind][-1]:.1f}", file=sys.stderr)
     print(
         f"league: {args.rounds} self-play round(s), {args.steps} transitions per side each, warm-ups 1 000, "

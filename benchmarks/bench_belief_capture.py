@@ -26,7 +26,6 @@ What a belief costs in training, and how well it locates an unseen opponent: ``b
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import os
 import statistics
@@ -42,6 +41,7 @@ import torch as th  # noqa: E402
 
 from pecli.match import play_match  # noqa: E402
 from pecli.policies import resolve_policy  # noqa: E402
+from pecli.rl.evaluations import evaluation_log, read_evaluations  # noqa: E402
 from pecli.scenario import Scenario, load_scenario  # noqa: E402
 from pecli.stats import two_proportion_z_test  # noqa: E402
 from pecli.tournament import PairingResult, pairing_results, player_spec  # noqa: E402
@@ -68,9 +68,9 @@ def _checkpoints_within(run: Path, minutes: float) -> list[tuple[Path, float]]:
     The run's evaluation log maps steps to CPU time; a checkpoint's CPU time is interpolated between
     its rows. Checkpoints with the same step count hold the same policy: one of them is listed.
     """
-    rows = list(csv.DictReader((run / "eval_pursuer.csv").open()))
-    steps = [0] + [int(r["steps"]) for r in rows]
-    used = [0.0] + [float(r["cpu_seconds"]) / 60 for r in rows]
+    rows = read_evaluations(evaluation_log(run, "pursuer"))
+    steps = [0] + [r.steps for r in rows]
+    used = [0.0] + [r.cpu_seconds / 60 for r in rows]
     within = max((s for s, m in zip(steps, used) if m <= minutes), default=0)
     found: dict[int, Path] = {}
     for path in sorted((run / "pursuer").glob("*.zip")):  # ep*.zip sort before best/final/last
@@ -152,7 +152,7 @@ def capture(args: argparse.Namespace) -> None:
     for kind in args.kinds:
         for seed in args.seeds:
             run = curves / f"{args.config}-{kind}-s{seed}"
-            found = _checkpoints_within(run, args.minutes) if (run / "eval_pursuer.csv").is_file() else []
+            found = _checkpoints_within(run, args.minutes) if evaluation_log(run, "pursuer").is_file() else []
             if not found:
                 continue
             chosen = (

@@ -29,7 +29,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # the runs inherit it
 
 import numpy as np  # noqa: E402
 
-from pecli.exploit import curve_rows  # noqa: E402
+from pecli.rl.evaluations import read_evaluations  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CURVES = ROOT / "runs" / "bench_train"
@@ -73,8 +73,8 @@ def curves(args: argparse.Namespace) -> None:
 
 def _read(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
     """CPU minutes and capture rate of each evaluation in a run's ``eval_pursuer.csv``."""
-    rows = curve_rows(csv_path.parent, "pursuer")
-    return np.array([m for m, _ in rows]), np.array([r for _, r in rows])
+    rows = read_evaluations(csv_path)
+    return np.array([r.cpu_seconds / 60.0 for r in rows]), np.array([r.capture_rate for r in rows])
 
 
 def _trained_all_steps(run: Path) -> bool:

@@ -23,14 +23,18 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # the runs inherit it
 
 from pecli.process import cpu_seconds  # noqa: E402
+from pecli.records import Turn  # noqa: E402
+from pecli.rl.handover import STATE_FILE  # noqa: E402
+from pecli.rl.state import read_state_file  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SELFPLAY = Path(os.environ.get("PECLI_BENCH_SELFPLAY", ROOT / "runs" / "bench_train_selfplay"))
 
 
-def _turns(run: Path) -> list[dict]:
-    state = run / "selfplay.json"
-    return json.loads(state.read_text())["turns"] if state.is_file() else []
+def _turns(run: Path) -> list[Turn]:
+    """The run's finished turns, as its validated ``selfplay.json`` records them (none before its first)."""
+    state = run / STATE_FILE
+    return read_state_file(state).turns if state.is_file() else []
 
 
 def _done(run: Path, minutes: float) -> bool:
@@ -51,11 +55,11 @@ def selfplay(args: argparse.Namespace) -> None:
     for seed in args.seeds:
         for config in args.configs:
             run = SELFPLAY / f"{Path(config).stem}-s{seed}"
-            before = sum(t["cpu_seconds"] for t in _turns(run))  # earlier processes' finished turns
+            before = sum(t.cpu_seconds for t in _turns(run))  # earlier processes' finished turns
             if before >= 60 * args.minutes or _done(run, args.minutes):
                 continue
             command = [sys.executable, "-m", "pecli", "selfplay", "--zoo", str(SELFPLAY), "--name", run.name, "-q"]
-            command += ["--resume"] if (run / "selfplay.json").exists() else ["-c", config, "--seed", str(seed)]
+            command += ["--resume"] if (run / STATE_FILE).exists() else ["-c", config, "--seed", str(seed)]
             print("started:", " ".join(command[1:]), flush=True)
             process = subprocess.Popen(command, cwd=ROOT)
             capped = False
@@ -69,7 +73,7 @@ def selfplay(args: argparse.Namespace) -> None:
                 # played all its rounds, or reached the cap (its finished turns may sum to a little less:
                 # a later call with the same cap must not resume it, or it would train past it bit by bit)
                 (run / "done").write_text("all rounds\n" if process.returncode == 0 else f"{args.minutes}\n")
-            used = sum(t["cpu_seconds"] for t in _turns(run))
+            used = sum(t.cpu_seconds for t in _turns(run))
             print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
     print(
         f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
@@ -80,7 +84,7 @@ def selfplay(args: argparse.Namespace) -> None:
         final = {}
         for config in args.configs[:2]:
             run = SELFPLAY / f"{Path(config).stem}-s{seed}"
-            final[config] = {t["role"]: run / t["checkpoint"] for t in _turns(run)}
+            final[config] = {t.role: run / t.checkpoint for t in _turns(run)}
         if any(set(f) != {"pursuer", "evader"} for f in final.values()):
             print(f"| {seed} | - | - | a run has no finished round yet |")
             continue

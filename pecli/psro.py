@@ -173,7 +173,7 @@ def _check(job: PsroJob) -> None:
         for spec in specs:
             resolve_policy(spec, role, job.scenario, seed=0)  # plays this game and role, or one line why not
     if job.reuse is not None:
-        pairings_cache(job.reuse)
+        pairings_cache(job.reuse, META_GAME_DIR)
 
 
 def _read_record(path: Path) -> PsroRecord | None:
@@ -227,7 +227,7 @@ def take_pairings(job: PsroJob, source: Path, populations: dict[Role, list[str]]
     """Copy the pairings of the populations' meta-game that the folder ``source`` has played and ``job.out``
     lacks; report how many, and why none matched when none did."""
     keys = pairing_keys(job.scenario, populations["pursuer"], populations["evader"], job.episodes, META_SEEDS)
-    copied, lacking = reuse_pairings(source, job.out / META_GAME_DIR, keys)
+    copied, lacking = reuse_pairings(pairings_cache(source, META_GAME_DIR), job.out / META_GAME_DIR, keys)
     if lacking:
         hint = (
             ""

@@ -142,6 +142,7 @@ class RatingRow(_Record):
 class TournamentRecord(_Record):
     """What a tournament's ``results.json`` must hold to be read: every pairing between two rated players."""
 
+    scenario: str = Field(default="", max_length=MAX_TEXT)
     episodes_per_seed: int = Field(ge=1, le=MAX_COUNT)
     seeds: list[int] = Field(min_length=1, max_length=MAX_ENTRIES)
     pairings: list[PairingRow] = Field(max_length=MAX_ENTRIES)

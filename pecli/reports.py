@@ -14,7 +14,8 @@ from rich.text import Text
 from pecli.io import atomic_path, atomic_write_json
 from pecli.metagame import WEIGHT_FLOOR, MetaGame
 from pecli.policies.nash import NASH_FILE, mixture_record
-from pecli.tournament import TournamentResults
+from pecli.records import TournamentRecord
+from pecli.tournament import RESULTS_FILE, TournamentResults
 
 TABLE_WIDTH = 120
 """Columns a printed table may take at most (as ``pecli.cli.common.TABLE_WIDTH``): a grid wider than that is printed
@@ -156,7 +157,7 @@ def write_reports(results: TournamentResults, out: Path) -> list[Path]:
     """Write ``results.json``, ``results.csv`` and ``capture_rates.png`` into ``out``; returns their paths."""
     out.mkdir(parents=True, exist_ok=True)
     data = results.to_json()
-    atomic_write_json(out / "results.json", data)
+    atomic_write_json(out / RESULTS_FILE, data)
     with atomic_path(out / "results.csv") as tmp, tmp.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(
@@ -184,7 +185,7 @@ def write_reports(results: TournamentResults, out: Path) -> list[Path]:
                     row["best_in_row"],
                 ]
             )
-    return [out / "results.json", out / "results.csv", heatmap(results, out / "capture_rates.png")]
+    return [out / RESULTS_FILE, out / "results.csv", heatmap(results, out / "capture_rates.png")]
 
 
 def nash_record(results: TournamentResults, game: MetaGame) -> dict:
@@ -310,31 +311,31 @@ def is_hj_spec(spec: str) -> bool:
     return spec == "hj" or spec.startswith("hj:") or spec.endswith(".npz")
 
 
-def table_two(data: dict) -> Table:
-    """A tournament's ``results.json`` in the paper's Table II layout: evaders as rows; per pursuer the
-    normalised time-to-capture (σ), then per pursuer the capture rate. HJ players come first and are
-    called "optimal control"."""
-    players = {r["name"]: r for r in data.get("ratings", [])}
-    pairings = {(p["pursuer"], p["evader"]): p for p in data.get("pairings", [])}
+def table_two(record: TournamentRecord) -> Table:
+    """A tournament's results (:func:`pecli.tournament.read_results`) in the paper's Table II layout: evaders as
+    rows; per pursuer the normalised time-to-capture (σ), then per pursuer the capture rate. HJ players come first
+    and are called "optimal control"."""
+    players = {r.name: r for r in record.ratings}
+    pairings = {(p.pursuer, p.evader): p for p in record.pairings}
 
     def ordered(role: str) -> list[str]:
-        names = [name for name, r in players.items() if r.get("role") == role]
-        return sorted(names, key=lambda name: (not is_hj_spec(players[name].get("spec", "")), name))
+        names = [name for name, r in players.items() if r.role == role]
+        return sorted(names, key=lambda name: (not is_hj_spec(players[name].spec), name))
 
     pursuers, evaders = ordered("pursuer"), ordered("evader")
     hj_count = {
-        role: sum(is_hj_spec(players[n].get("spec", "")) for n in names)
+        role: sum(is_hj_spec(players[n].spec) for n in names)
         for role, names in (("pursuer", pursuers), ("evader", evaders))
     }
 
     def label(name: str) -> str:
-        if not is_hj_spec(players[name].get("spec", "")):
+        if not is_hj_spec(players[name].spec):
             return name
-        return "optimal control" if hj_count[players[name]["role"]] == 1 else f"optimal control ({name})"
+        return "optimal control" if hj_count[players[name].role] == 1 else f"optimal control ({name})"
 
     table = Table(
-        title=f"{data.get('scenario', '')}: time-to-capture (σ) and capture rate, Table II layout "
-        f"({data.get('episodes_per_seed', '?')} episodes × {len(data.get('seeds', []))} seeds per pairing)"
+        title=f"{record.scenario}: time-to-capture (σ) and capture rate, Table II layout "
+        f"({record.episodes_per_seed} episodes × {len(record.seeds)} seeds per pairing)"
     )
     table.add_column("evader \\ pursuer", style="bold")
     for name in pursuers:
@@ -343,8 +344,8 @@ def table_two(data: dict) -> Table:
         table.add_column(f"rate: {label(name)}", justify="center", overflow="fold")
     for evader in evaders:
         cells = [pairings.get((pursuer, evader)) for pursuer in pursuers]
-        times = [f"{c['time_to_capture_mean']:.2f} (σ={c['time_to_capture_std']:.2f})" if c else "-" for c in cells]
-        rates = [f"{c['capture_rate']:.2f}" if c else "-" for c in cells]
+        times = [f"{c.time_to_capture_mean:.2f} (σ={c.time_to_capture_std:.2f})" if c else "-" for c in cells]
+        rates = [f"{c.captures / c.episodes:.2f}" if c else "-" for c in cells]
         table.add_row(label(evader), *times, *rates)
     return table
 

@@ -37,10 +37,12 @@ from pecli.policies import resolve_policy
 from pecli.policies.mix import player_label
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.process import die_with, one_torch_thread
+from pecli.records import TournamentRecord, validated
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
 from pecli.zoo import (
+    CONFIG_FILE,
     LAST,
     RESUME_DIR,
     CheckpointMeta,
@@ -51,6 +53,7 @@ from pecli.zoo import (
 )
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
+RESULTS_FILE = "results.json"  # a tournament's pairings and ratings (pecli.reports.write_reports)
 PAIRINGS_DIR = "pairings"  # a tournament's cache of played pairings, one <key>.json each (pairing_key)
 MAX_PAIRING_BYTES = 1 << 16  # a cached pairing is a few hundred bytes
 KEY_LENGTH = 24  # hex digits of a pairing_key
@@ -179,7 +182,7 @@ def _checkpoint_name(path: Path, meta: CheckpointMeta) -> str:
     """A checkpoint's player name, relative to its zoo: ``run/folder/checkpoint`` (``ours/pursuer/final``,
     ``league/exploiter-evader/round-003``); the run and role of its metadata for a file outside a run folder."""
     run = path.parent.parent
-    if (run / "config.yaml").is_file():
+    if (run / CONFIG_FILE).is_file():
         return f"{run.name}/{path.parent.name}/{path.stem}"
     return f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
 
@@ -337,8 +340,6 @@ def play_pairing(
     scenario: Scenario, pursuer: Player, evader: Player, episodes: int, seeds: Sequence[int]
 ) -> PairingResult:
     """Play ``episodes`` batched games per seed; both policies act on the whole batch."""
-    import numpy as np
-
     captured, times = [], []
     p = resolve_policy(pursuer.spec, "pursuer", scenario)
     e = resolve_policy(evader.spec, "evader", scenario)
@@ -381,19 +382,21 @@ def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None
     return result
 
 
-def pairings_cache(folder: Path) -> Path:
-    """The cache of played pairings in ``folder``: a tournament's ``--out`` (``folder/pairings``) or a PSRO folder
-    (``folder/meta-game/pairings``); :class:`PecliError` if it holds neither."""
-    for cache in (folder / PAIRINGS_DIR, folder / "meta-game" / PAIRINGS_DIR):
-        if cache.is_dir():
-            return cache
-    raise PecliError(f"{folder} holds no played pairings (no {PAIRINGS_DIR}/ or meta-game/{PAIRINGS_DIR}/ in it)")
+def pairings_cache(folder: Path, *within: str) -> Path:
+    """The cache of played pairings in ``folder``: a tournament's ``--out`` (``folder/pairings``) or, for each
+    name in ``within``, ``folder/NAME/pairings`` (where a tournament is run inside another job's folder);
+    :class:`PecliError` if it holds none of them."""
+    places = [Path(PAIRINGS_DIR), *(Path(name) / PAIRINGS_DIR for name in within)]
+    for place in places:
+        if (folder / place).is_dir():
+            return folder / place
+    raise PecliError(f"{folder} holds no played pairings (no {' or '.join(f'{p}/' for p in places)} in it)")
 
 
-def reuse_pairings(source: Path, out: Path, keys: Iterable[str]) -> tuple[int, int]:
+def reuse_pairings(found: Path, out: Path, keys: Iterable[str]) -> tuple[int, int]:
     """Copy the pairings ``keys`` (:func:`pairing_keys`) that ``out``'s cache (a :func:`run_tournament` output)
-    lacks from the played pairings of the tournament or PSRO folder ``source``; return how many were copied and
-    how many were lacking.
+    lacks from another cache of played pairings, ``found`` (:func:`pairings_cache`); return how many were copied
+    and how many were lacking.
 
     A pairing's file name is its key, a digest of everything that decides its games (scenario, players, games,
     seeds, pecli version), so a copied result is used only by an identical pairing; what it holds is checked
@@ -402,7 +405,6 @@ def reuse_pairings(source: Path, out: Path, keys: Iterable[str]) -> tuple[int, i
     """
     cache = out / PAIRINGS_DIR
     cache.mkdir(parents=True, exist_ok=True)
-    found = pairings_cache(source)
     lacking = sorted({key for key in keys if not (cache / f"{key}.json").is_file()})
     copied = 0
     for key in lacking:
@@ -676,3 +678,37 @@ def pairing_results(
     pairings = [(p, e) for p in players["pursuer"] for e in players["evader"]]
     grid = run_tournament(scenario, players, pairings, episodes, seeds, out, workers, on_result).grid()
     return {(p.spec, e.spec): grid[(p.name, e.name)] for p, e in pairings}
+
+
+def read_results(path: Path) -> TournamentRecord:
+    """A tournament's ``results.json`` (``path`` itself, or ``path/results.json`` for its folder), validated;
+    :class:`PecliError` in one line if it is not one."""
+    path = path / RESULTS_FILE if path.is_dir() else path
+    return validated(TournamentRecord, read_json(path, "tournament's results"), path, "tournament's results")
+
+
+def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
+    """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
+
+    Ratings of different tournaments sit on different scales, so only one tournament is used; a file that is no
+    tournament's results (damaged, or a rating of NaN) is passed over. Keys are resolved checkpoint paths, and
+    ``role:spec`` for players that are not files (a policy string such as ``random-walk`` can play both roles).
+    """
+    for results in sorted(zoo.rglob(RESULTS_FILE), key=lambda p: p.stat().st_mtime, reverse=True):
+        if results.is_symlink() or not results.is_file():
+            continue
+        try:
+            record = read_results(results)
+        except PecliError:
+            continue
+        found = {}
+        for rating in record.ratings:
+            entry = {**rating.model_dump(), "results": str(results)}
+            spec = Path(rating.spec)
+            if spec.suffix == ".zip":
+                path = spec if spec.is_absolute() else results.parent / spec
+                found[str(path.resolve())] = {**entry, "spec": str(path)}
+            else:  # a built-in, family or module:Class player, keyed by role and policy string
+                found[f"{rating.role}:{rating.spec}"] = entry
+        return found
+    return {}

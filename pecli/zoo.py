@@ -51,6 +51,8 @@ from pecli.text import shortened
 FINAL = "final"
 LAST = "last"
 BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
+CONFIG_FILE = "config.yaml"  # per run: the resolved scenario it was started with
+COMMAND_FILE = "command.txt"  # per run: every command that started or resumed it
 AVERAGE_FILE = "average.zip"  # per self-play main learner: the mean of its last rounds, what the run hands over
 JOB_FILE = "run.json"
 MAX_METADATA_BYTES = 16 << 20  # a checkpoint's .json: its opponents' records make it grow with a self-play pool
@@ -292,7 +294,7 @@ class Run:
     def open(cls, zoo: Path, name: str) -> Run:
         """The run ``zoo/name``, locked for writing; :class:`ZooError` if there is none."""
         path = zoo / check_run_name(name)
-        if not (path / "config.yaml").is_file():
+        if not (path / CONFIG_FILE).is_file():
             raise ZooError(f"no run '{name}' in {zoo} to resume")
         run = cls(path)
         run._lock()
@@ -303,7 +305,7 @@ class Run:
         from pecli.errors import ConfigError
         from pecli.scenario import read_yaml
 
-        source = self.path / "config.yaml"
+        source = self.path / CONFIG_FILE
         try:
             data = read_yaml(source)
         except ConfigError as exc:
@@ -312,12 +314,13 @@ class Run:
 
     def write_config(self, scenario: Scenario) -> None:
         """Write the resolved scenario as the run's ``config.yaml``."""
-        atomic_write_text(self.path / "config.yaml", yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
+        atomic_write_text(self.path / CONFIG_FILE, yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False))
 
     def log_command(self) -> None:
         """Append the current command to ``command.txt``."""
-        previous = (self.path / "command.txt").read_text() if (self.path / "command.txt").exists() else ""
-        atomic_write_text(self.path / "command.txt", previous + command_line() + "\n")
+        log = self.path / COMMAND_FILE
+        previous = log.read_text() if log.exists() else ""
+        atomic_write_text(log, previous + command_line() + "\n")
 
     def role_dir(self, role: Role) -> Path:
         directory = self.path / role
@@ -389,9 +392,15 @@ class CheckpointEntry:
 
 def runs_in(zoo: Path) -> list[Run]:
     """Every run folder (one with a ``config.yaml``) under ``zoo``, sorted by name."""
-    if (zoo / "config.yaml").is_file():
+    if (zoo / CONFIG_FILE).is_file():
         return [Run(zoo)]
-    return [Run(p.parent) for p in sorted(zoo.glob("*/config.yaml"))]
+    return [Run(p.parent) for p in sorted(zoo.glob(f"*/{CONFIG_FILE}"))]
+
+
+def run_of(checkpoint: Path) -> Run | None:
+    """The run a checkpoint sits in (``RUN/ROLE/NAME.zip`` with ``RUN/config.yaml``), or None outside a run."""
+    run = checkpoint.parent.parent
+    return Run(run) if (run / CONFIG_FILE).is_file() else None
 
 
 def checkpoints_in(run: Run) -> list[CheckpointEntry]:
@@ -413,37 +422,3 @@ def checkpoints_in(run: Run) -> list[CheckpointEntry]:
 def finite_number(value: object) -> bool:
     """Whether ``value`` is a finite int or float (a boolean is not), as a record read back must hold."""
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
-    """Ratings of checkpoints from the newest readable tournament under ``zoo`` (``**/results.json``).
-
-    Ratings of different tournaments sit on different scales, so only one tournament is used.
-    Keys are resolved checkpoint paths, and ``role:spec`` for players that are not files (a policy
-    string such as ``random-walk`` can play both roles).
-    """
-    for results in sorted(zoo.rglob("results.json"), key=lambda p: p.stat().st_mtime, reverse=True):
-        try:
-            data = read_json(results, "tournament's results")
-            ratings = data["ratings"] if isinstance(data, dict) else None
-        except (PecliError, KeyError):
-            continue
-        if not isinstance(ratings, list):
-            continue
-        found = {}
-        for rating in ratings:
-            if (
-                not isinstance(rating, dict)
-                or not isinstance(rating.get("spec"), str)
-                or not rating["spec"]
-                or not all(finite_number(rating.get(key)) for key in ("elo", "stderr"))
-            ):
-                continue  # not what a tournament writes: a rating of NaN never ranks a checkpoint
-            spec = Path(rating["spec"])
-            if spec.suffix == ".zip":
-                path = spec if spec.is_absolute() else results.parent / spec
-                found[str(path.resolve())] = {**rating, "spec": str(path), "results": str(results)}
-            else:  # a built-in, family or module:Class player, keyed by role and policy string
-                found[f"{rating.get('role')}:{rating['spec']}"] = {**rating, "results": str(results)}
-        return found
-    return {}

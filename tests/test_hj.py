@@ -575,9 +575,11 @@ def test_hj_joins_both_sides_of_a_tournament(coarse: Solution, point_mass: Scena
     assert {p.identity for p in found.players["pursuer"]} == {f"hj:{coarse.key}:rules{RULES}"}
     results = run_tournament(point_mass, found.players, schedule(found.players), 20, [0], tmp_path / "t")
     assert len(results.pairings) == 2
-    from pecli.reports import table_two
+    from pecli.reports import table_two, write_reports
+    from pecli.tournament import read_results
 
-    table = table_two(json.loads(json.dumps(results.to_json())))
+    write_reports(results, tmp_path / "t")
+    table = table_two(read_results(tmp_path / "t"))
     assert [c.header for c in table.columns][1:] == ["time: optimal control", "rate: optimal control"]
 
 
@@ -610,6 +612,24 @@ def test_cli_solve_reuses_and_errors_are_one_line(private_cache: Path, monkeypat
     for bad in (["--model", "rel5d"], ["--order", "max"], ["--backend", "jax"]):  # usage errors: the choices
         result = runner.invoke(app, ["hj", "solve", *bad])
         assert result.exit_code == 2 and bad[0] in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"pairings": [1]}, "damaged tournament's results"),
+        (
+            {"episodes_per_seed": 4, "seeds": [0], "pairings": [{"pursuer": "a", "evader": "b"}], "ratings": []},
+            "pairings.0",
+        ),
+        ({"episodes_per_seed": 4, "seeds": [0], "pairings": [], "ratings": []}, "without pairings"),
+        ([], "damaged tournament's results"),
+    ],
+)
+def test_hj_table_refuses_what_no_tournament_writes(tmp_path: Path, data: object, message: str) -> None:
+    (tmp_path / "results.json").write_text(json.dumps(data))
+    result = runner.invoke(app, ["hj", "table", str(tmp_path)])
+    assert result.exit_code == 1 and message in result.output and "internal error" not in result.output
 
 
 def test_the_cli_choices_are_the_solver_s() -> None:

@@ -153,6 +153,6 @@ def test_pairings_are_taken_only_from_small_json_files(tmp_path: Path) -> None:
     (source / "ee").mkdir()
     (source / "ee.json").mkdir()  # not a file
     out = tmp_path / "out"
-    assert reuse_pairings(tmp_path / "source", out, ["aa", "bb", "cc", "dd", "ee", "ff"]) == (1, 6)
+    assert reuse_pairings(source, out, ["aa", "bb", "cc", "dd", "ee", "ff"]) == (1, 6)
     assert json.loads((out / "pairings" / "aa.json").read_text()) == {"episodes": 4}
     assert sorted(p.name for p in (out / "pairings").iterdir()) == ["aa.json"]

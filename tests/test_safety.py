@@ -475,8 +475,8 @@ def test_deeply_nested_records_are_one_clear_line(stopped: Path, tmp_path: Path)
 
 
 def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Scenario) -> None:
-    """A pairing cache with impossible numbers is played again; a rating of NaN never ranks a checkpoint."""
-    from pecli.zoo import tournament_ratings
+    """A pairing cache with impossible numbers is played again; results with a rating of NaN rank nothing."""
+    from pecli.tournament import tournament_ratings
 
     out = tmp_path / "t"
     args = [
@@ -514,8 +514,9 @@ def test_poisoned_tournament_records_are_not_believed(tmp_path: Path, quick: Sce
     results = out / "results.json"
     data = json.loads(results.read_text())
     data["ratings"][0]["elo"] = float("nan")
+    assert len(tournament_ratings(tmp_path)) == len(data["ratings"])
     results.write_text(json.dumps(data))
-    assert len(tournament_ratings(tmp_path)) == len(data["ratings"]) - 1
+    assert tournament_ratings(tmp_path) == {}
 
 
 @pytest.mark.parametrize(

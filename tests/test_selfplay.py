@@ -394,7 +394,8 @@ def test_pfsp_priors_come_from_the_zoos_tournament_by_role(finished: tuple[Path,
         {"name": "g", "role": "evader", "spec": "greedy", "elo": 1800.0, "stderr": 1},
     ]
     (run.parent / "tournament").mkdir(exist_ok=True)
-    (run.parent / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
+    results = {"episodes_per_seed": 4, "seeds": [0], "pairings": [], "ratings": ratings}
+    (run.parent / "tournament" / "results.json").write_text(json.dumps(results))
     priors = loop.opponents.priors("pursuer", loop.state)
     assert priors["greedy"] == pytest.approx(predicted_win_rate(1800, 1600)) and priors["greedy"] > 0.5
     assert priors["random-walk"] == pytest.approx(predicted_win_rate(1200, 1600))

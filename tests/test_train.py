@@ -310,7 +310,7 @@ def test_the_same_seed_trains_the_same_weights(tmp_path: Path) -> None:
 
 
 def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> None:
-    from pecli.rl.train import forget_evaluations_after
+    from pecli.rl.evaluations import forget_evaluations_after
 
     log = tmp_path / "eval_pursuer.csv"
     log.write_text(
@@ -318,6 +318,26 @@ def test_a_resumed_run_forgets_evaluations_past_its_commit(tmp_path: Path) -> No
     )
     forget_evaluations_after(log, 200)  # evaluated at 300 after the commit at 200, then killed mid-line
     assert log.read_text() == "steps,cpu_seconds,wall_seconds,capture_rate\n100,1.0,1.0,0.3000\n200,2.0,2.0,0.5000\n"
+
+
+def test_an_evaluation_log_is_read_row_by_row_and_only_whole_rows(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pecli.rl import evaluations
+    from pecli.rl.evaluations import Evaluated, append_evaluation, read_evaluations, start_log
+
+    log = tmp_path / "eval_pursuer.csv"
+    start_log(log)
+    append_evaluation(log, 100, 1.0, 1.5, 0.25)
+    with log.open("a") as handle:  # what a stranger's file, or a kill, can leave
+        handle.write("200,nan,2,0.5\n300,3,3,1.5\n-4,1,1,0.5\nx,1,1,0.5\n500,5,5\n600,6,6,0.75\n70")
+    assert read_evaluations(log) == [Evaluated(100, 1.0, 1.5, 0.25), Evaluated(600, 6.0, 6.0, 0.75)]
+    (tmp_path / "link.csv").symlink_to(log)
+    assert read_evaluations(tmp_path / "link.csv") == [] and read_evaluations(tmp_path / "none.csv") == []
+    assert read_evaluations(tmp_path) == []  # a folder
+    log.write_bytes(b"steps,cpu_seconds,wall_seconds,capture_rate\n" + b"1,1,1,0.5\n" * 10)
+    monkeypatch.setattr(evaluations, "MAX_LOG_BYTES", 50)
+    assert read_evaluations(log) == []  # too large to be a log
 
 
 # -- a diverged training stops and writes nothing broken ----------------------------------------------------

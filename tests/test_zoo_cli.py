@@ -169,7 +169,8 @@ def test_best_passes_over_a_damaged_checkpoint(zoo: Path, tmp_path: Path) -> Non
         for n, elo in (("empty", 1500.0), ("cut", 1400.0), ("final", 1000.0))
     ]
     (tmp_path / "zoo" / "tournament").mkdir()
-    (tmp_path / "zoo" / "tournament" / "results.json").write_text(json.dumps({"ratings": ratings}))
+    results = {"episodes_per_seed": 4, "seeds": [0], "pairings": [], "ratings": ratings}
+    (tmp_path / "zoo" / "tournament" / "results.json").write_text(json.dumps(results))
     result = invoke("zoo", "best", "pursuer", str(tmp_path / "zoo"))
     assert result.exit_code == 0, result.output
     assert result.stdout.strip() == str(good)

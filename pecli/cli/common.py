@@ -177,7 +177,7 @@ def scenario_for(players: list[str], config: str | None, folders: bool = False) 
     the paper's."""
     from pecli.policies import stored_scenario
     from pecli.scenario import load_scenario
-    from pecli.zoo import Run
+    from pecli.zoo import CONFIG_FILE, Run
 
     if config is not None:
         return load_scenario(config)
@@ -186,7 +186,7 @@ def scenario_for(players: list[str], config: str | None, folders: bool = False) 
             return scenario
         path = Path(player.strip())
         if folders and path.is_dir():
-            runs = [path] if (path / "config.yaml").is_file() else sorted(p.parent for p in path.rglob("config.yaml"))
+            runs = [path] if (path / CONFIG_FILE).is_file() else sorted(p.parent for p in path.rglob(CONFIG_FILE))
             if runs:
                 return Run(runs[0]).scenario()
             checkpoint = next(iter(sorted(path.rglob("*.zip"))), None)  # a run's role folder: its checkpoints

@@ -13,7 +13,6 @@ from rich.table import Table
 
 from pecli.cli.common import console, err_console, user_errors
 from pecli.errors import PecliError
-from pecli.io import read_json
 from pecli.progress import WorkProgress
 
 app = typer.Typer(
@@ -244,10 +243,10 @@ def table(
     HJ players are called "optimal control", as in the paper.
     """
     from pecli.reports import paper_table_two, table_two
+    from pecli.tournament import read_results
 
-    path = results / "results.json" if results.is_dir() else results
-    data = read_json(path, "tournament's results.json")
-    if not isinstance(data, dict) or not data.get("pairings"):
-        raise PecliError(f"{path}: not a tournament's results.json (no pairings)")
-    console.print(table_two(data))
+    record = read_results(results)
+    if not record.pairings:
+        raise PecliError(f"{results}: a tournament's results without pairings")
+    console.print(table_two(record))
     console.print(paper_table_two())

@@ -28,7 +28,8 @@ ZooArgument = Annotated[Path, typer.Argument(help="The zoo folder (or one run fo
 @user_errors
 def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
     """Runs and checkpoints as a table, with tournament ratings where a tournament rated them."""
-    from pecli.zoo import checkpoints_in, runs_in, tournament_ratings
+    from pecli.tournament import tournament_ratings
+    from pecli.zoo import checkpoints_in, runs_in
 
     if not zoo.is_dir():
         raise PecliError(f"no zoo at {zoo}")
@@ -124,7 +125,9 @@ RUN_MARKS = ("command.txt", "run.json", "selfplay.json")  # what pecli writes in
 
 def _is_run(folder: Path) -> bool:
     """Whether ``folder`` is a run folder pecli made."""
-    return (folder / "config.yaml").is_file() and any((folder / mark).is_file() for mark in RUN_MARKS)
+    from pecli.zoo import CONFIG_FILE
+
+    return (folder / CONFIG_FILE).is_file() and any((folder / mark).is_file() for mark in RUN_MARKS)
 
 
 @app.command("rm")
@@ -178,12 +181,8 @@ def best(
 
     A rated checkpoint that is gone, damaged or without its metadata is passed over (with a warning).
     """
-    from pecli.zoo import (
-        ZooError,
-        checkpoint_problem,
-        read_metadata,
-        tournament_ratings,
-    )
+    from pecli.tournament import tournament_ratings
+    from pecli.zoo import ZooError, checkpoint_problem, read_metadata
 
     if role not in ("pursuer", "evader"):
         raise PecliError(f"role must be pursuer or evader, not '{role}'")

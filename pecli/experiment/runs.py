@@ -26,7 +26,7 @@ from pecli.rl.handover import STATE_FILE as SELFPLAY_STATE
 from pecli.rl.handover import stale_averages
 from pecli.rl.state import SelfPlayState, read_state_file
 from pecli.scenario import Training, dotted, read_yaml
-from pecli.zoo import FINAL, RESUME_DIR, Run
+from pecli.zoo import CONFIG_FILE, FINAL, RESUME_DIR, Run
 
 DURABLE_RECORD = "state.json"  # pecli.rl.durable.RECORD, read here as plain JSON
 
@@ -159,7 +159,7 @@ def execute_run(
             report=report,
         ).run()
     else:
-        resume = (folder / "config.yaml").is_file()
+        resume = (folder / CONFIG_FILE).is_file()
         opponent = run.opponent or DEFAULT_OPPONENT[run.schedule]
         train(
             TrainJob(
@@ -198,7 +198,7 @@ def setting_changes(old: Any, new: dict[str, Any]) -> list[str]:
 
 def check_unchanged(run: RunSpec, zoo: Path) -> None:
     """:class:`ConfigError` if ``run`` was started in ``zoo`` with other settings: a resumed run keeps its own."""
-    recorded = zoo / run.name / "config.yaml"
+    recorded = zoo / run.name / CONFIG_FILE
     if not recorded.is_file():
         return
     changed = setting_changes(read_yaml(recorded), run.scenario.model_dump(mode="json"))

@@ -28,7 +28,7 @@ from pecli.policies.exported import ExportedPolicy, exported_scenario
 from pecli.policies.learned import LearnedPolicy
 from pecli.runtime import ExportedModel, file_sha256, sidecar_path
 from pecli.scenario import Scenario
-from pecli.zoo import Run, read_metadata
+from pecli.zoo import CONFIG_FILE, read_metadata, run_of
 
 
 @dataclass(frozen=True)
@@ -43,10 +43,11 @@ class ExportResult:
 
 def checkpoint_scenario(checkpoint: Path) -> Scenario:
     """The scenario a zoo checkpoint was trained on: its run's ``config.yaml`` (``<run>/<role>/<name>.zip``)."""
-    run = checkpoint.resolve().parent.parent
-    if not (run / "config.yaml").is_file():
-        raise ExportError(f"{checkpoint} is not inside a zoo run (no {run / 'config.yaml'}): pass --config")
-    return Run(run).scenario()
+    run = run_of(checkpoint.resolve())
+    if run is None:
+        folder = checkpoint.resolve().parent.parent
+        raise ExportError(f"{checkpoint} is not inside a zoo run (no {folder / CONFIG_FILE}): pass --config")
+    return run.scenario()
 
 
 def example_inputs(layout: SILayout, learned: LearnedPolicy, batch: int = 2) -> dict[str, th.Tensor]:

@@ -112,12 +112,12 @@ class LearnedPolicy(WindowedPolicy):
 def _scenario_mismatch(path: Path, meta: CheckpointMeta, scenario: Scenario) -> str:
     """How the game ``path`` learned differs from ``scenario``: the differing keys when its run's config is
     beside it, else the two names and fingerprints."""
-    from pecli.zoo import Run
+    from pecli.zoo import run_of
 
-    config = path.parent.parent / "config.yaml"
-    if config.is_file():
+    run = run_of(path)
+    if run is not None:
         try:
-            trained = Run(path.parent.parent).scenario()
+            trained = run.scenario()
         except PecliError:
             trained = None
         if trained is not None and trained.fingerprint() == meta.scenario_hash:

@@ -240,12 +240,13 @@ def stored_scenario(spec: str) -> Scenario | None:
             from pecli.runtime import read_sidecar, sidecar_path
 
             return exported_scenario(read_sidecar(path), source=str(sidecar_path(path)))
-        if suffix == ".zip" and path.is_file() and (path.parent.parent / "config.yaml").is_file():
-            from pecli.zoo import Run, read_metadata
+        if suffix == ".zip" and path.is_file():
+            from pecli.zoo import read_metadata, run_of
 
-            learned = read_metadata(path).scenario_hash
-            scenario = Run(path.parent.parent).scenario()
-            return scenario if scenario.fingerprint() == learned else None
+            if (run := run_of(path)) is None:
+                return None
+            scenario = run.scenario()
+            return scenario if scenario.fingerprint() == read_metadata(path).scenario_hash else None
     except PecliError:
         return None
     return None

@@ -3,7 +3,6 @@ progress, evaluation, self-play's pool records and live view."""
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from collections import deque
@@ -22,6 +21,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from pecli.errors import PecliError
 from pecli.progress import PeriodicLines
+from pecli.rl.evaluations import append_evaluation, read_evaluations, start_log
 from pecli.scenario import Scenario
 
 
@@ -253,12 +253,10 @@ class Evaluation(BaseCallback):
         else:
             self._next = (self.num_timesteps // self.every + 1) * self.every
         if self.csv_path.exists():  # a resumed run: its best so far is in its log
-            with self.csv_path.open(newline="") as handle:
-                rates = [_number(row.get("capture_rate")) for row in csv.DictReader(handle)]
-            self.best = max((self.sign * rate for rate in rates if rate is not None), default=-math.inf)
+            rates = [row.capture_rate for row in read_evaluations(self.csv_path)]
+            self.best = max((self.sign * rate for rate in rates), default=-math.inf)
         else:
-            with self.csv_path.open("w", newline="") as handle:
-                csv.writer(handle).writerow(["steps", "cpu_seconds", "wall_seconds", "capture_rate"])
+            start_log(self.csv_path)
         self._wall = time.perf_counter()
 
     def _on_step(self) -> bool:
@@ -275,10 +273,7 @@ class Evaluation(BaseCallback):
         rate = self.evaluate(self.model)
         self.logger.record("eval/capture_rate", rate)
         cpu = self.clock()
-        with self.csv_path.open("a", newline="") as handle:
-            csv.writer(handle).writerow(
-                [self.num_timesteps, f"{cpu:.2f}", f"{time.perf_counter() - self._wall:.2f}", f"{rate:.4f}"]
-            )
+        append_evaluation(self.csv_path, self.num_timesteps, cpu, time.perf_counter() - self._wall, rate)
         if self.on_record is not None:
             self.on_record(self.num_timesteps, cpu, rate)
         if self.sign * round(rate, 4) > self.best:  # as logged, so a resumed run's tie is no new best
@@ -430,11 +425,3 @@ class RoundDisplay(BaseCallback):
         if self.live is not None:
             self.live.stop()
             self.live = None
-
-
-def _number(text: str | None) -> float | None:
-    """``text`` as a float; ``None`` for a missing or half-written value."""
-    try:
-        return float(text) if text else None
-    except ValueError:
-        return None

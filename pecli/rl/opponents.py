@@ -30,7 +30,7 @@ from pecli.rl.pool import OpponentPool, predicted_win_rate
 from pecli.rl.state import SelfPlayState
 from pecli.roles import Role, opponent_of
 from pecli.scenario import Scenario, SelfPlay
-from pecli.zoo import tournament_ratings
+from pecli.tournament import tournament_ratings
 
 
 class PoolPlayers:

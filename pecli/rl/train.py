@@ -20,7 +20,6 @@ from stable_baselines3.common.callbacks import CallbackList
 
 from pecli.belief.model import LEARNED_KINDS, features_dim
 from pecli.errors import PecliError
-from pecli.io import atomic_write_text
 from pecli.match import play_match
 from pecli.models.algorithms import (
     algorithm_kwargs,
@@ -47,6 +46,7 @@ from pecli.rl.callbacks import (
     every_episodes,
 )
 from pecli.rl.durable import DurableState
+from pecli.rl.evaluations import evaluation_log, forget_evaluations_after
 from pecli.roles import DEFAULT_OPPONENT, Role, opponent_of
 from pecli.scenario import Scenario, scenario_from_dict
 from pecli.text import cpu_time
@@ -330,7 +330,7 @@ def train(
         durable.restore(record, model, fit)
         model.set_random_seed(resume_seed(job.seed, record.steps))
         episodes, cpu_before = record.episodes, record.cpu_seconds
-        forget_evaluations_after(run.path / f"eval_{job.role}.csv", record.steps)
+        forget_evaluations_after(evaluation_log(run.path, job.role), record.steps)
     if on_start is not None:
         on_start(run)
 
@@ -396,7 +396,7 @@ def train(
             Evaluation(
                 evaluator(job, eval_opponent),
                 t.eval_every,
-                run.path / f"eval_{job.role}.csv",
+                evaluation_log(run.path, job.role),
                 cpu_seconds,
                 save_best,
                 maximise=job.role == "pursuer",
@@ -423,21 +423,6 @@ def train(
     return commit(stats.episodes, FINAL)
 
 
-def forget_evaluations_after(log: Path, steps: int) -> None:
-    """Drop the rows of an evaluation log past ``steps``: a run stopped after them resumes from before."""
-    if not log.is_file():
-        return
-    lines = log.read_text().splitlines(keepends=True)
-
-    def before(line: str) -> bool:  # a whole row (a kill can leave half of one) written at most at ``steps``
-        first = line.split(",", 1)[0]
-        return line.endswith("\n") and first.isdigit() and int(first) <= steps
-
-    kept = lines[:1] + [line for line in lines[1:] if before(line)]
-    if len(kept) < len(lines):
-        atomic_write_text(log, "".join(kept))
-
-
 def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable[[str], None]) -> None:
     """A run with no durable state (it stopped before its first checkpoint): start it again from scratch,
     in the same folder, after clearing what the stopped attempt left. A run written by an older pecli
@@ -448,7 +433,7 @@ def _start_over(run: Run, job: TrainJob, durable: DurableState, report: Callable
             "which this one cannot resume; its checkpoints still play (with --trust): start a new run"
         )
     durable.clear()
-    (run.path / f"eval_{job.role}.csv").unlink(missing_ok=True)
+    evaluation_log(run.path, job.role).unlink(missing_ok=True)
     report(f"run '{job.name}' stopped before its first checkpoint: nothing to resume, starting it over")
 
 

@@ -43,15 +43,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.errors import ConfigError, PecliError
 from pecli.experiment.compare import (
-    ADVERSARIES,
-    HEURISTIC_EVADERS,
-    Comparison,
     RunPlayers,
     compare_arms,
     contrast,
     main_players,
     over_every_evader,
     pool,
+    recipe,
     run_rates,
     welch_p,
 )
@@ -63,10 +61,10 @@ from pecli.process import one_torch_thread, sigterm_stops
 from pecli.rl.fork import run_cpu_hours
 from pecli.rl.handover import AVERAGE_FILE
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted
-from pecli.scenario import load_scenario, read_yaml
+from pecli.scenario import load_scenario
+from pecli.zoo import Run
 
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league|nash)-s\d+")  # <belief>-<schedule>-s<seed>
-TARGETS = {"heuristics": 0.90, "adversaries": 0.85, "cross-play": 0.80, "pure-pursuit held to": 0.25}
 
 
 def strength_runs(args: argparse.Namespace) -> list[RunSpec]:
@@ -128,29 +126,6 @@ def picked(args: argparse.Namespace, average: int = 1, averaged: tuple[str, ...]
     )
 
 
-def missed_targets(result: Comparison) -> list[str]:
-    missed = []
-    for row in result.rows:
-        missed += [
-            f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['heuristics']}"
-            for e in HEURISTIC_EVADERS
-            if row.scripted[e] < TARGETS["heuristics"]
-        ]
-        missed += [
-            f"{row.run} vs {e}: {row.scripted[e]:.3f} < {TARGETS['adversaries']}"
-            for e in ADVERSARIES
-            if row.scripted[e] < TARGETS["adversaries"]
-        ]
-        if row.cross_play is not None and row.cross_play < TARGETS["cross-play"]:
-            missed.append(f"{row.run} cross-play: {row.cross_play:.3f} < {TARGETS['cross-play']}")
-        if row.held_by_pure_pursuit > TARGETS["pure-pursuit held to"]:
-            missed.append(
-                f"{row.run}'s evader lets pure pursuit capture {row.held_by_pure_pursuit:.3f} > "
-                f"{TARGETS['pure-pursuit held to']}"
-            )
-    return missed
-
-
 def per_run(faced: dict, sides: dict[str, list], evaders: set) -> str:
     rates = {label: run_rates(faced, names, evaders) for label, names in sides.items()}
     listed = "; ".join(f"{label} {', '.join(f'{r:.3f}' for r in values)}" for label, values in rates.items())
@@ -170,11 +145,7 @@ def report(args: argparse.Namespace) -> None:
     }
     groups: dict[tuple[str, str], list[str]] = {}  # (schedule, belief) -> its runs
     for name in runs:
-        training = read_yaml(args.zoo / name / "config.yaml")["training"]
-        selfplay = training.get("selfplay", {})
-        opponents = selfplay.get("opponents")
-        schedule = opponents if opponents in ("league", "nash") else selfplay.get("schedule", "alternating")
-        groups.setdefault((schedule, training["belief"]), []).append(name)
+        groups.setdefault(recipe(Run(args.zoo / name).scenario()), []).append(name)
     budget = (
         f"at {args.cpu_hours} CPU-h"
         if args.cpu_hours is not None
@@ -197,7 +168,7 @@ def report(args: argparse.Namespace) -> None:
                 f"- {belief}: {first} {rate_a:.3f} vs {second} {rate_b:.3f} over the {len(common)} evaders all met:"
                 f" z-test p = {p:.2g}; per run {per_run(faced, pair, common)}"
             )
-    missed = missed_targets(result)
+    missed = result.missed()
     for schedule in sorted({s for s, b in groups if b == "bimdn" and (s, "none") in groups}):
         sides = {"bimdn": groups[(schedule, "bimdn")], "none": groups[(schedule, "none")]}
         every, rate_b, rate_n, p, excess, p_stratified = over_every_evader(faced, sides["bimdn"], sides["none"])

@@ -112,6 +112,36 @@ def test_kinds_are_compared_over_every_evader_stratified_by_evader() -> None:
         over_every_evader({"a": {"x": (1, 2)}, "b": {"y": (1, 2)}}, ["a"], ["b"])
 
 
+def test_a_run_misses_each_target_it_is_below_in_one_line() -> None:
+    from pecli.experiment.compare import ADVERSARIES, HEURISTIC_EVADERS, ArmRow, Comparison, Targets
+
+    scripted = dict.fromkeys((*HEURISTIC_EVADERS, *ADVERSARIES), 0.95) | {"rash": 0.89, "hider": 0.85}
+    row = ArmRow(
+        "a", "none-league-s0", 12, 1.0, scripted, cross_play=0.79, held_by_pure_pursuit=0.26, evader_vs_others=None
+    )
+    missed = Comparison(["a"], ["none-league-s0"], [], 500, rows=[row]).missed()
+    assert missed == [
+        "none-league-s0 vs rash: 0.890 < 0.9",
+        "none-league-s0 cross-play: 0.790 < 0.8",
+        "none-league-s0's evader lets pure pursuit catch 0.260 > 0.25",
+    ]  # hider at 0.85 meets its 0.85
+    lenient = Targets(heuristics=0.8, cross_play=0.7, pure_pursuit_held_to=0.3)
+    assert Comparison(["a"], ["none-league-s0"], [], 500, rows=[row]).missed(lenient) == []
+    two_arms = Comparison(["a", "b"], ["none-league-s0"], [], 500, rows=[row]).missed()
+    assert two_arms[0].startswith("a/none-league-s0 vs rash")
+
+
+def test_runs_group_by_schedule_or_opponent_rule_and_belief() -> None:
+    from pecli.experiment.compare import recipe
+    from pecli.rl.train import with_overrides
+    from pecli.scenario import load_scenario
+
+    league = load_scenario("league")
+    assert recipe(league) == ("league", league.training.belief)
+    plain = with_overrides(league, {"selfplay.opponents": "pfsp", "selfplay.schedule": "simultaneous", "belief": "ukf"})
+    assert recipe(plain) == ("simultaneous", "ukf")
+
+
 def test_compare_refuses_with_one_line(tmp_path: Path) -> None:
     runner = CliRunner()
     fake_run(tmp_path / "zoo", "sp", 1.0, 1)

@@ -564,6 +564,17 @@ def test_experiment_compare_plays_a_run_against_its_fork(finished: tuple[Path, l
     assert len(rows) == 2 and all("| sp | 2 |" in row for row in rows)
     assert rows[0].split("|")[4:8] == rows[1].split("|")[4:8]  # the same weights: one player, the same games
     assert "- forked" in result.stdout and "a paired test needs 2 runs" in result.stdout
+    assert "the league recipe's targets" in result.stdout  # a tiny run meets none of them, or says so
+    averaged = CliRunner().invoke(
+        app,
+        ["experiment", "compare", "--arms", f"a={tmp_path / 'arm'}", "--average", "2", "-n", "4", "-w", "1"]
+        + ["--out", str(tmp_path / "cmp2")],
+    )
+    assert averaged.exit_code == 0, averaged.output
+    assert sorted(p.name for p in (tmp_path / "arm" / "report" / "average").glob("*.zip")) == [
+        "sp-evader-001-002.zip",
+        "sp-pursuer-001-002.zip",
+    ]
 
 
 def test_generations_play_every_round_against_every_round(finished: tuple[Path, list[str]], tmp_path: Path) -> None:

@@ -416,6 +416,15 @@ def compare(
             show_default=False,
         ),
     ] = None,
+    average: Annotated[
+        int,
+        typer.Option(
+            "--average",
+            min=1,
+            help="Each run's players as the mean of the weights of its last K rounds there, both roles (as a run "
+            "hands over; 1: the round's own checkpoints).",
+        ),
+    ] = 1,
     out: Annotated[Path, typer.Option("--out", "-o", help="Where the games are cached.")] = Path("runs/compare"),
     workers: Annotated[int, typer.Option("--workers", "-w", min=1, help="Processes that play the pairings.")] = 2,
 ) -> None:
@@ -423,11 +432,13 @@ def compare(
 
     Each arm's pursuers play the scripted evaders and the evaders of every other run of every arm; each arm is
     pooled against the first (z-test over games) and per run (paired t-test). Runs pair by name (belief kind,
-    schedule, seed), e.g. a control and its copy by `pecli zoo fork` trained on with other settings.
+    schedule, seed), e.g. a control and its copy by `pecli zoo fork` trained on with other settings. Last, every
+    target of the league recipe that a run misses.
     """
     import math
 
-    from pecli.experiment.compare import compare_arms, main_players
+    from pecli.experiment.compare import LEAGUE_TARGETS, compare_arms, main_players
+    from pecli.roles import ROLES
 
     if cpu_hours is not None and at_round is not None:
         raise PecliError("give --cpu-hours or --round, not both")
@@ -442,10 +453,18 @@ def compare(
             raise PecliError(f"--arms {entry}: {zoo} is not a folder")
         zoos[label] = Path(zoo)
     picked = {
-        label: main_players(zoo, cpu_hours, at_round, report=lambda line: err_console.print(line, highlight=False))
+        label: main_players(
+            zoo,
+            cpu_hours,
+            at_round,
+            average=average,
+            averaged=ROLES,
+            report=lambda line: err_console.print(line, highlight=False),
+        )
         for label, zoo in zoos.items()
     }
-    scenario = scenario_for([str(players.pursuer) for runs in picked.values() for players in runs.values()], config)
+    run_folders = [str(zoos[label] / name) for label, runs in picked.items() for name in runs]
+    scenario = scenario_for(run_folders, config, folders=True)  # the runs' own (an average has no run beside it)
     result = compare_arms(picked, scenario, out, episodes=episodes, workers=workers)
     budget = (
         f"{cpu_hours:g} CPU-h" if cpu_hours is not None else f"round {at_round}" if at_round else "the newest round"
@@ -453,3 +472,9 @@ def compare(
     console.print(f"at {budget}", highlight=False)
     for line in result.lines():
         console.print(line, highlight=False)
+    missed = result.missed()
+    console.print(
+        f"\nthe league recipe's targets ({LEAGUE_TARGETS.describe()}): "
+        + ("every one met" if not missed else f"{len(missed)} missed\n- " + "\n- ".join(missed)),
+        highlight=False,
+    )

@@ -38,6 +38,27 @@ Faced = dict[Hashable, dict[Hashable, tuple[int, int]]]  # pursuer -> each evade
 
 
 @dataclass(frozen=True)
+class Targets:
+    """What each run of a self-play recipe must reach: its pursuer against the paper's heuristic evaders, against
+    each adversarial evader and on average against the other runs' evaders (cross-play), and its evader against
+    pure pursuit (the most that pure pursuit may catch)."""
+
+    heuristics: float = 0.90
+    adversaries: float = 0.85
+    cross_play: float = 0.80
+    pure_pursuit_held_to: float = 0.25
+
+    def describe(self) -> str:
+        return (
+            f"pursuers >= {self.heuristics:.2f} vs the heuristics, >= {self.adversaries:.2f} vs each adversary, "
+            f">= {self.cross_play:.2f} in cross-play; evaders hold pure pursuit to <= {self.pure_pursuit_held_to:.2f}"
+        )
+
+
+LEAGUE_TARGETS = Targets()  # the league recipe's (configs/league.yaml)
+
+
+@dataclass(frozen=True)
 class RunPlayers:
     """One run's main players at the budget asked for: its checkpoints, their round and the run's CPU-hours by then."""
 
@@ -171,6 +192,14 @@ def over_every_evader(faced: Faced, first: list, second: list) -> tuple[set, flo
     return common, *pooled_z_test(faced, first, second, common), excess, p_stratified
 
 
+def recipe(scenario: Scenario) -> tuple[str, str]:
+    """A self-play run's group for comparisons: ``(schedule, belief)``, where the ``league`` and ``nash`` opponent
+    rules count as schedules of their own (they change what the learners meet, not when they learn)."""
+    selfplay = scenario.training.selfplay
+    schedule = selfplay.opponents if selfplay.opponents in ("league", "nash") else selfplay.schedule
+    return schedule, scenario.training.belief
+
+
 # --- playing the arms -----------------------------------------------------------------------------------------------
 
 
@@ -202,6 +231,26 @@ class Comparison:
     z_p: dict[str, float] = field(default_factory=dict)  # each other arm against the first, over games
     paired_p: dict[str, float | None] = field(default_factory=dict)  # the same per run (None under 2 runs)
     differences: dict[str, list[float]] = field(default_factory=dict)  # per run, that arm minus the first
+
+    def missed(self, targets: Targets = LEAGUE_TARGETS) -> list[str]:
+        """Each target a run missed, one line each (none: every run met every target)."""
+        missed = []
+        for row in self.rows:
+            name = f"{row.arm}/{row.run}" if len(self.arms) > 1 else row.run
+            missed += [
+                f"{name} vs {e}: {row.scripted[e]:.3f} < {bound}"
+                for evaders, bound in ((HEURISTIC_EVADERS, targets.heuristics), (ADVERSARIES, targets.adversaries))
+                for e in evaders
+                if row.scripted[e] < bound
+            ]
+            if row.cross_play is not None and row.cross_play < targets.cross_play:
+                missed.append(f"{name} cross-play: {row.cross_play:.3f} < {targets.cross_play}")
+            if row.held_by_pure_pursuit > targets.pure_pursuit_held_to:
+                missed.append(
+                    f"{name}'s evader lets pure pursuit catch {row.held_by_pure_pursuit:.3f} > "
+                    f"{targets.pure_pursuit_held_to}"
+                )
+        return missed
 
     def lines(self) -> list[str]:
         """The comparison as Markdown."""

@@ -59,10 +59,9 @@ from pecli.match import Behaviour, play_match
 from pecli.policies import resolve_policy
 from pecli.process import one_torch_thread, sigterm_stops
 from pecli.rl.fork import run_cpu_hours
-from pecli.rl.handover import AVERAGE_FILE
 from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted
 from pecli.scenario import load_scenario
-from pecli.zoo import Run
+from pecli.zoo import AVERAGE_FILE, Run
 
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league|nash)-s\d+")  # <belief>-<schedule>-s<seed>
 

@@ -3,8 +3,9 @@
 
 The files are those a zoo, a tournament or an experiment folder from elsewhere holds: checkpoint metadata, a
 learner's durable state, ``run.json``, ``selfplay.json``, a Nash mixture, a best-response record, a pairing cache,
-an export's sidecar, a run's ``config.yaml``; and the values of ``--set``. Inputs are arbitrary JSON (deep, wide,
-wrong types, huge integers), arbitrary bytes, and well-formed records with one field replaced.
+a tournament's ``results.json``, a run's evaluation log, an export's sidecar, a run's ``config.yaml``; and the
+values of ``--set``. Inputs are arbitrary JSON (deep, wide, wrong types, huge integers), arbitrary bytes, and
+well-formed records with one field replaced.
 """
 
 from __future__ import annotations
@@ -109,6 +110,17 @@ PAIRING = {
     "time_to_capture_std": 0.1,
 }
 
+RESULTS = {
+    "scenario": "quick",
+    "episodes_per_seed": 10,
+    "seeds": [0],
+    "pairings": [{**PAIRING, "pursuer": "p", "evader": "e"}],
+    "ratings": [
+        {"name": "p", "role": "pursuer", "spec": "pure-pursuit", "elo": 1510.0, "stderr": 30.0},
+        {"name": "e", "role": "evader", "spec": "greedy", "elo": 1490.0, "stderr": 30.0},
+    ],
+}
+
 
 @FUZZ
 @given(text=records_like(META))
@@ -168,6 +180,30 @@ def test_pairing_cache(tmp_path: Path, text: str) -> None:
     )
     if result is not None:  # believed only when it is what a pairing can give
         assert 0 <= result.captures <= result.episodes and math.isfinite(result.time_to_capture_mean)
+
+
+@FUZZ
+@given(text=records_like(RESULTS))
+def test_tournament_results(tmp_path: Path, text: str) -> None:
+    from pecli.tournament import read_results, tournament_ratings
+
+    (tmp_path / "results.json").write_text(text, encoding="utf-8", errors="surrogatepass")
+    only_clear_errors(read_results, tmp_path)
+    assert isinstance(tournament_ratings(tmp_path), dict)  # an unreadable file rates nothing, and raises nothing
+
+
+@FUZZ
+@given(
+    text=st.one_of(
+        documents, st.text(max_size=300).map(lambda rows: f"steps,cpu_seconds,wall_seconds,capture_rate\n{rows}")
+    )
+)
+def test_evaluation_log(tmp_path: Path, text: str) -> None:
+    from pecli.rl.evaluations import read_evaluations
+
+    (tmp_path / "eval_pursuer.csv").write_text(text, encoding="utf-8", errors="surrogatepass")
+    for row in read_evaluations(tmp_path / "eval_pursuer.csv"):
+        assert row.steps >= 0 and 0 <= row.capture_rate <= 1 and math.isfinite(row.cpu_seconds)
 
 
 @FUZZ

@@ -335,6 +335,9 @@ def test_an_evaluation_log_is_read_row_by_row_and_only_whole_rows(
     (tmp_path / "link.csv").symlink_to(log)
     assert read_evaluations(tmp_path / "link.csv") == [] and read_evaluations(tmp_path / "none.csv") == []
     assert read_evaluations(tmp_path) == []  # a folder
+    with log.open("a") as handle:
+        handle.write("\n700,7,7," + "9" * 200_000 + "\n")  # a field past the csv module's limit
+    assert read_evaluations(log)[-1] == Evaluated(600, 6.0, 6.0, 0.75)
     log.write_bytes(b"steps,cpu_seconds,wall_seconds,capture_rate\n" + b"1,1,1,0.5\n" * 10)
     monkeypatch.setattr(evaluations, "MAX_LOG_BYTES", 50)
     assert read_evaluations(log) == []  # too large to be a log

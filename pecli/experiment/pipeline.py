@@ -374,7 +374,7 @@ class ExperimentRunner:
 def handed_over(runs: list[RunSpec], zoo: Path) -> dict[str, dict[str, list[str]]]:
     """Each self-play run's handed-over players, ``<zoo>/<run>/<role>/average.zip``: ``{run: {role: [path]}}``;
     :class:`PecliError` for a run that has none (it trained no round)."""
-    from pecli.rl.handover import AVERAGE_FILE
+    from pecli.zoo import AVERAGE_FILE
 
     kept: dict[str, dict[str, list[str]]] = {}
     for run in runs:

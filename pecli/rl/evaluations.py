@@ -51,16 +51,19 @@ def read_evaluations(path: Path) -> list[Evaluated]:
     """The whole rows of the log at ``path``, in order; none if there is no log or it is too large to be one."""
     if path.is_symlink() or not path.is_file() or path.stat().st_size > MAX_LOG_BYTES:
         return []
-    rows = []
+    rows: list[Evaluated] = []
     with path.open(newline="", errors="replace") as handle:
-        for row in csv.DictReader(handle):
-            try:
-                steps = int(row["steps"])
-                numbers = [float(row[column]) for column in COLUMNS[1:]]
-            except (KeyError, TypeError, ValueError):
-                continue
-            if steps >= 0 and all(math.isfinite(x) and x >= 0 for x in numbers) and numbers[2] <= 1:
-                rows.append(Evaluated(steps, *numbers))
+        try:
+            for row in csv.DictReader(handle):
+                try:
+                    steps = int(row["steps"])
+                    numbers = [float(row[column]) for column in COLUMNS[1:]]
+                except (KeyError, TypeError, ValueError):
+                    continue
+                if steps >= 0 and all(math.isfinite(x) and x >= 0 for x in numbers) and numbers[2] <= 1:
+                    rows.append(Evaluated(steps, *numbers))
+        except csv.Error:  # a field past the csv module's limit, or a NUL: no log pecli writes
+            return rows
     return rows
 
 

@@ -37,7 +37,7 @@ import torch as th
 from pecli.io import atomic_write_json
 from pecli.rl import budget
 from pecli.rl.averaging import average_checkpoints
-from pecli.rl.handover import AVERAGE_FILE, STATE_FILE, stale_averages
+from pecli.rl.handover import STATE_FILE, stale_averages
 from pecli.rl.learner import (  # noqa: F401 (the run's job and its stop, importable from here)
     KEEP,
     Learner,
@@ -55,7 +55,7 @@ from pecli.rl.train import (
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.scenario import Scenario
 from pecli.text import cpu_time, plural
-from pecli.zoo import Run
+from pecli.zoo import AVERAGE_FILE, Run
 
 
 def write_averages(run: Run, state: SelfPlayState, scenario: Scenario) -> None:

@@ -21,6 +21,9 @@ MAX_COUNT = 10**16  # transitions or games a record may count (a scenario's roun
 MAX_CPU_SECONDS = 3.6e7  # 10 000 CPU-hours
 MAX_ENTRIES = 100_000  # opponents in one pool, turns in one run
 MAX_TEXT = 4096  # a name, a policy string, a run-relative path
+MAX_SPEC = 1 << 20  # a player's policy string: a mixture (mix:) of up to 64 members' paths
+MAX_ELO = 1e5  # a Bradley-Terry rating's distance from 1500 (its prior keeps it within a few thousand)
+NO_NUL = r"^[^\x00]*$"  # a string that can name a file
 
 Learner = Literal["main", "exploiter"]
 # a checkpoint a record names: inside the run, in a learner's folder (no path out of it)
@@ -134,9 +137,9 @@ class RatingRow(_Record):
 
     name: str = Field(max_length=MAX_TEXT)
     role: Role
-    spec: str = Field(max_length=MAX_TEXT)
-    elo: float
-    stderr: float = Field(ge=0.0)
+    spec: str = Field(max_length=MAX_SPEC, pattern=NO_NUL)
+    elo: float = Field(ge=1500 - MAX_ELO, le=1500 + MAX_ELO)
+    stderr: float = Field(ge=0.0, le=MAX_ELO)
 
 
 class TournamentRecord(_Record):
@@ -150,12 +153,12 @@ class TournamentRecord(_Record):
 
     @model_validator(mode="after")
     def _pairings_name_rated_players(self) -> TournamentRecord:
-        roles = {r.name: r.role for r in self.ratings}
-        if len(roles) != len(self.ratings):
+        rated = {(r.name, r.role) for r in self.ratings}  # a name may stand for a pursuer and for an evader
+        if len(rated) != len(self.ratings):
             raise ValueError("ratings: a player is rated twice")
         for row in self.pairings:
             for role, name in (("pursuer", row.pursuer), ("evader", row.evader)):
-                if roles.get(name) != role:
+                if (name, role) not in rated:
                     raise ValueError(f"pairings: {name[:60]} is no rated {role}")
         return self
 

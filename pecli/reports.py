@@ -315,23 +315,23 @@ def table_two(record: TournamentRecord) -> Table:
     """A tournament's results (:func:`pecli.tournament.read_results`) in the paper's Table II layout: evaders as
     rows; per pursuer the normalised time-to-capture (σ), then per pursuer the capture rate. HJ players come first
     and are called "optimal control"."""
-    players = {r.name: r for r in record.ratings}
+    players = {(r.role, r.name): r for r in record.ratings}  # a name may stand for a pursuer and an evader
     pairings = {(p.pursuer, p.evader): p for p in record.pairings}
 
     def ordered(role: str) -> list[str]:
-        names = [name for name, r in players.items() if r.role == role]
-        return sorted(names, key=lambda name: (not is_hj_spec(players[name].spec), name))
+        names = [name for (side, name) in players if side == role]
+        return sorted(names, key=lambda name: (not is_hj_spec(players[(role, name)].spec), name))
 
     pursuers, evaders = ordered("pursuer"), ordered("evader")
     hj_count = {
-        role: sum(is_hj_spec(players[n].spec) for n in names)
+        role: sum(is_hj_spec(players[(role, n)].spec) for n in names)
         for role, names in (("pursuer", pursuers), ("evader", evaders))
     }
 
-    def label(name: str) -> str:
-        if not is_hj_spec(players[name].spec):
+    def label(role: str, name: str) -> str:
+        if not is_hj_spec(players[(role, name)].spec):
             return name
-        return "optimal control" if hj_count[players[name].role] == 1 else f"optimal control ({name})"
+        return "optimal control" if hj_count[role] == 1 else f"optimal control ({name})"
 
     table = Table(
         title=f"{record.scenario}: time-to-capture (σ) and capture rate, Table II layout "
@@ -339,14 +339,14 @@ def table_two(record: TournamentRecord) -> Table:
     )
     table.add_column("evader \\ pursuer", style="bold")
     for name in pursuers:
-        table.add_column(f"time: {label(name)}", justify="center", overflow="fold")
+        table.add_column(f"time: {label('pursuer', name)}", justify="center", overflow="fold")
     for name in pursuers:
-        table.add_column(f"rate: {label(name)}", justify="center", overflow="fold")
+        table.add_column(f"rate: {label('pursuer', name)}", justify="center", overflow="fold")
     for evader in evaders:
         cells = [pairings.get((pursuer, evader)) for pursuer in pursuers]
         times = [f"{c.time_to_capture_mean:.2f} (σ={c.time_to_capture_std:.2f})" if c else "-" for c in cells]
         rates = [f"{c.captures / c.episodes:.2f}" if c else "-" for c in cells]
-        table.add_row(label(evader), *times, *rates)
+        table.add_row(label("evader", evader), *times, *rates)
     return table
 
 

@@ -42,7 +42,6 @@ from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
 from pecli.zoo import (
-    CONFIG_FILE,
     LAST,
     RESUME_DIR,
     CheckpointMeta,
@@ -50,6 +49,7 @@ from pecli.zoo import (
     checkpoint_problem,
     finite_number,
     read_metadata,
+    run_of,
 )
 
 CACHE_SCHEMA = 2  # bump when the same players and seeds would play other games (2: mixed beliefs' draws)
@@ -181,9 +181,8 @@ def _unique_names(players: list[Player]) -> list[Player]:
 def _checkpoint_name(path: Path, meta: CheckpointMeta) -> str:
     """A checkpoint's player name, relative to its zoo: ``run/folder/checkpoint`` (``ours/pursuer/final``,
     ``league/exploiter-evader/round-003``); the run and role of its metadata for a file outside a run folder."""
-    run = path.parent.parent
-    if (run / CONFIG_FILE).is_file():
-        return f"{run.name}/{path.parent.name}/{path.stem}"
+    if (run := run_of(path)) is not None:
+        return f"{run.path.name}/{path.parent.name}/{path.stem}"
     return f"{meta.run}/{meta.role}/{path.stem}" if meta.run else path.stem
 
 
@@ -707,7 +706,10 @@ def tournament_ratings(zoo: Path) -> dict[str, dict[str, Any]]:
             spec = Path(rating.spec)
             if spec.suffix == ".zip":
                 path = spec if spec.is_absolute() else results.parent / spec
-                found[str(path.resolve())] = {**entry, "spec": str(path)}
+                try:
+                    found[str(path.resolve())] = {**entry, "spec": str(path)}
+                except (OSError, RuntimeError):  # a link loop, or a path too long for this system
+                    continue
             else:  # a built-in, family or module:Class player, keyed by role and policy string
                 found[f"{rating.role}:{rating.spec}"] = entry
         return found

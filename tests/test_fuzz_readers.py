@@ -192,6 +192,31 @@ def test_tournament_results(tmp_path: Path, text: str) -> None:
     assert isinstance(tournament_ratings(tmp_path), dict)  # an unreadable file rates nothing, and raises nothing
 
 
+@pytest.mark.parametrize(
+    "rating",
+    [{"spec": "a\x00b.zip"}, {"elo": 1e6}, {"stderr": 1e300}, {"spec": "x" * ((1 << 20) + 1)}],
+)
+def test_a_rating_no_tournament_gives_is_refused(tmp_path: Path, rating: dict) -> None:
+    from pecli.tournament import read_results, tournament_ratings
+
+    data = {**RESULTS, "ratings": [{**RESULTS["ratings"][0], **rating}, RESULTS["ratings"][1]]}
+    (tmp_path / "results.json").write_text(json.dumps(data))
+    with pytest.raises(PecliError, match="damaged tournament's results"):
+        read_results(tmp_path)
+    assert tournament_ratings(tmp_path) == {}
+
+
+def test_one_name_may_be_a_pursuer_and_an_evader(tmp_path: Path) -> None:
+    from pecli.reports import table_two
+    from pecli.tournament import read_results
+
+    ratings = [{**r, "name": "x"} for r in RESULTS["ratings"]]
+    data = {**RESULTS, "ratings": ratings, "pairings": [{**PAIRING, "pursuer": "x", "evader": "x"}]}
+    (tmp_path / "results.json").write_text(json.dumps(data))
+    record = read_results(tmp_path)
+    assert len(record.ratings) == 2 and table_two(record).row_count == 1
+
+
 @FUZZ
 @given(
     text=st.one_of(

@@ -421,8 +421,8 @@ def compare(
         typer.Option(
             "--average",
             min=1,
-            help="Each run's players as the mean of the weights of its last K rounds there, both roles (as a run "
-            "hands over; 1: the round's own checkpoints).",
+            help="Each run's players as the mean of the weights of its last K finished rounds there, both roles "
+            "(a run with fewer is left out; 1: the round's own checkpoints).",
         ),
     ] = 1,
     out: Annotated[Path, typer.Option("--out", "-o", help="Where the games are cached.")] = Path("runs/compare"),

@@ -52,7 +52,11 @@ def read_evaluations(path: Path) -> list[Evaluated]:
     if path.is_symlink() or not path.is_file() or path.stat().st_size > MAX_LOG_BYTES:
         return []
     rows: list[Evaluated] = []
-    with path.open(newline="", errors="replace") as handle:
+    try:
+        handle = path.open(newline="", errors="replace")
+    except OSError:  # not ours to read
+        return rows
+    with handle:
         try:
             for row in csv.DictReader(handle):
                 try:

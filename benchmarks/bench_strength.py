@@ -43,9 +43,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from pecli.errors import ConfigError, PecliError
 from pecli.experiment.compare import (
-    RunPlayers,
     compare_arms,
     contrast,
+    handed_over,
     main_players,
     over_every_evader,
     pool,
@@ -59,9 +59,9 @@ from pecli.match import Behaviour, play_match
 from pecli.policies import resolve_policy
 from pecli.process import one_torch_thread, sigterm_stops
 from pecli.rl.fork import run_cpu_hours
-from pecli.rl.selfplay import STATE_FILE, SelfPlayInterrupted
+from pecli.rl.selfplay import SelfPlayInterrupted
 from pecli.scenario import load_scenario
-from pecli.zoo import AVERAGE_FILE, Run
+from pecli.zoo import Run
 
 RUN_NAME = re.compile(r"[a-z-]+-(alternating|simultaneous|league|nash)-s\d+")  # <belief>-<schedule>-s<seed>
 
@@ -188,11 +188,7 @@ def exploit(args: argparse.Namespace) -> None:
     from pecli.exploit import exploit_pair
 
     if args.handed_over:
-        runs = {
-            run.name: RunPlayers(run / "pursuer" / AVERAGE_FILE, run / "evader" / AVERAGE_FILE, 0, 0.0)
-            for run in sorted(p.parent for p in args.zoo.glob(f"*/{STATE_FILE}"))
-            if all((run / role / AVERAGE_FILE).is_file() for role in ("pursuer", "evader"))
-        }
+        runs = handed_over(args.zoo)
     else:
         runs = picked(args)
     runs = {name: players for name, players in runs.items() if not args.runs or name in args.runs}

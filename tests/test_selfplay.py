@@ -536,6 +536,15 @@ def test_a_diverging_self_play_stops_without_writing_its_round(tmp_path: Path) -
     assert not list((tmp_path / "nan").rglob("*.zip"))
 
 
+def test_what_each_run_hands_over_is_listed_by_name(finished: tuple[Path, list[str]]) -> None:
+    from pecli.experiment.compare import handed_over
+
+    run, _ = finished
+    found = handed_over(run.parent)
+    assert list(found) == ["sp"] and found["sp"].round == 2 and found["sp"].cpu_hours > 0
+    assert found["sp"].pursuer == run / "pursuer" / "average.zip" and found["sp"].evader.is_file()
+
+
 def test_experiment_compare_plays_a_run_against_its_fork(finished: tuple[Path, list[str]], tmp_path: Path) -> None:
     run, _ = finished
     fork = CliRunner().invoke(app, ["zoo", "fork", str(run), "--to", str(tmp_path / "arm")])

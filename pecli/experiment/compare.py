@@ -14,6 +14,7 @@ round ``at_round``, or the newest), so runs still training compare at any equal 
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass, field
@@ -24,12 +25,14 @@ from scipy.stats import ttest_ind, ttest_rel
 from pecli.errors import PecliError
 from pecli.io import file_digest, read_json
 from pecli.records import SelfPlayRecord, validated
+from pecli.rl.budget import cpu_through
 from pecli.rl.handover import STATE_FILE
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import mantel_haenszel_test, two_proportion_z_test
 from pecli.text import cpu_time
 from pecli.tournament import Player, find_players, run_tournament
+from pecli.zoo import AVERAGE_FILE
 
 HEURISTIC_EVADERS = ("greedy", "rash", "random-walk")
 ADVERSARIES = ("circler", "blindside", "wall-runner", "hider", "corner-sitter")
@@ -78,6 +81,23 @@ def _main_turns(state: Path) -> tuple[dict[tuple[int, Role], Path], list[dict]]:
     return main, [t.model_dump() for t in record.turns]
 
 
+def handed_over(zoo: Path) -> dict[str, RunPlayers]:
+    """What each self-play run under ``zoo`` hands over (its ``pursuer/average.zip`` and ``evader/average.zip``),
+    by run name, with the run's newest round and CPU-hours; runs without both are left out."""
+    runs = {}
+    for state in sorted(zoo.glob(f"*/{STATE_FILE}")):
+        run = state.parent
+        files = {role: run / role / AVERAGE_FILE for role in ROLES}
+        if not all(path.is_file() for path in files.values()):
+            continue
+        main, turns = _main_turns(state)
+        done = [r for r, role in main if role == "pursuer" and (r, "evader") in main]
+        runs[run.name] = RunPlayers(
+            files["pursuer"], files["evader"], max(done, default=0), cpu_through(turns, math.inf) / 3600
+        )
+    return runs
+
+
 def main_players(
     zoo: Path,
     cpu_hours: float | None = None,
@@ -93,7 +113,6 @@ def main_players(
     of the main learner's weights over the k rounds ending there (written once to ``<zoo>/report/average``).
     ``pattern``: only runs whose names match it. :class:`PecliError` if no run qualifies."""
     from pecli.rl.averaging import average_checkpoints
-    from pecli.rl.budget import cpu_through
 
     runs = {}
     for state in sorted(zoo.glob(f"*/{STATE_FILE}")):

@@ -241,7 +241,9 @@ def train(args: argparse.Namespace) -> None:
 
 def pecli_players(run: Path) -> dict[str, str]:
     """A pecli self-play run's handed-over players."""
-    players = {role: run / role / "average.zip" for role in ("pursuer", "evader")}
+    from pecli.zoo import AVERAGE_FILE
+
+    players = {role: run / role / AVERAGE_FILE for role in ("pursuer", "evader")}
     missing = [str(path) for path in players.values() if not path.is_file()]
     if missing:
         raise SystemExit(f"{run} is not a finished self-play run: no {missing[0]}")

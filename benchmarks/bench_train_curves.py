@@ -79,9 +79,9 @@ def _read(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _trained_all_steps(run: Path) -> bool:
     """Whether the run reached its ``--max-steps`` (rather than its CPU budget): it spent less CPU than asked."""
-    from pecli.zoo import Run, read_metadata
+    from pecli.zoo import FINAL, Run, read_metadata
 
-    final = run / "pursuer" / "final.zip"
+    final = run / "pursuer" / f"{FINAL}.zip"
     return final.is_file() and read_metadata(final).steps >= Run(run).scenario().training.steps
 
 

@@ -81,6 +81,11 @@ def _main_turns(state: Path) -> tuple[dict[tuple[int, Role], Path], list[dict]]:
     return main, [t.model_dump() for t in record.turns]
 
 
+def _finished_rounds(main: dict[tuple[int, Role], Path]) -> list[int]:
+    """The rounds in which both main learners ended their turns, in order."""
+    return sorted(r for r, role in main if role == "pursuer" and (r, "evader") in main)
+
+
 def handed_over(zoo: Path) -> dict[str, RunPlayers]:
     """What each self-play run under ``zoo`` hands over (its ``pursuer/average.zip`` and ``evader/average.zip``),
     by run name, with the run's newest round and CPU-hours; runs without both are left out."""
@@ -91,7 +96,7 @@ def handed_over(zoo: Path) -> dict[str, RunPlayers]:
         if not all(path.is_file() for path in files.values()):
             continue
         main, turns = _main_turns(state)
-        done = [r for r, role in main if role == "pursuer" and (r, "evader") in main]
+        done = _finished_rounds(main)
         runs[run.name] = RunPlayers(
             files["pursuer"], files["evader"], max(done, default=0), cpu_through(turns, math.inf) / 3600
         )
@@ -120,7 +125,7 @@ def main_players(
         if pattern is not None and not pattern.fullmatch(name):
             continue
         main, turns = _main_turns(state)
-        done = sorted(r for r, role in main if role == "pursuer" and (r, "evader") in main)  # both sides ended
+        done = _finished_rounds(main)
         spent = [cpu_through(turns, r) / 3600 for r in done]
         chosen = done[-1:]
         if cpu_hours is not None:

@@ -46,8 +46,10 @@ from pecli.hj import Problem  # noqa: E402
 from pecli.hj.oracle import solution_accuracy  # noqa: E402
 from pecli.hj.reachability import available, solve_with_hj_reachability  # noqa: E402
 from pecli.hj.solver import solve  # noqa: E402
+from pecli.records import TournamentRecord  # noqa: E402
 from pecli.reports import PAPER_TABLE_II  # noqa: E402
 from pecli.scenario import load_scenario  # noqa: E402
+from pecli.tournament import read_results  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EPISODES = 500
@@ -188,16 +190,16 @@ def table2(args: argparse.Namespace) -> None:
             file=sys.stderr,
         )
         subprocess.run(command, check=True, stdout=None if command[1:3] == ["hj", "table"] else subprocess.DEVNULL)
-    data = json.loads((out / "results.json").read_text())
-    cells = {(p["pursuer"], p["evader"]): p for p in data["pairings"]}
+    record = read_results(out)
+    cells = {(p.pursuer, p.evader): p for p in record.pairings}
     names = {
         "optimal control": {
-            "pursuer": _player_name(data, f"hj:belief={args.pursuer}", "pursuer"),
-            "evader": _player_name(data, f"hj:belief={args.evader}", "evader"),
+            "pursuer": _player_name(record, f"hj:belief={args.pursuer}", "pursuer"),
+            "evader": _player_name(record, f"hj:belief={args.evader}", "evader"),
         },
         "ours": {
-            "pursuer": _player_name(data, args.pursuer, "pursuer"),
-            "evader": _player_name(data, args.evader, "evader"),
+            "pursuer": _player_name(record, args.pursuer, "pursuer"),
+            "evader": _player_name(record, args.evader, "evader"),
         },
     }
     print("\n| pursuer vs evader | pecli capture (time-to-capture, σ) | paper capture |")
@@ -206,20 +208,19 @@ def table2(args: argparse.Namespace) -> None:
         paper = PAPER_TABLE_II[(pursuer, evader)][2]  # the capture rate
         cell = cells.get((names[pursuer]["pursuer"], names[evader]["evader"]))
         ours = (
-            f"{cell['capture_rate']:.3f} ({cell['time_to_capture_mean']:.2f}, {cell['time_to_capture_std']:.2f})"
+            f"{cell.captures / cell.episodes:.3f} ({cell.time_to_capture_mean:.2f}, {cell.time_to_capture_std:.2f})"
             if cell
             else "-"
         )
         print(f"| {pursuer} vs {evader} | {ours} | {paper:.2f} |")
 
 
-def _player_name(data: dict, spec: str, role: str) -> str:
+def _player_name(record: TournamentRecord, spec: str, role: str) -> str:
     """The tournament's name for the ``role`` player given as ``spec`` (a checkpoint's path, or a policy string)."""
-    for rating in data.get("ratings", []):
-        given = rating.get("spec", "")
-        same = given == spec or (spec.endswith(".zip") and Path(given).resolve() == Path(spec).resolve())
-        if same and rating.get("role") == role:
-            return rating["name"]
+    for rating in record.ratings:
+        same = rating.spec == spec or (spec.endswith(".zip") and Path(rating.spec).resolve() == Path(spec).resolve())
+        if same and rating.role == role:
+            return rating.name
     return spec
 
 

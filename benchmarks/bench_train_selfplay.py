@@ -2,11 +2,10 @@
 
     python benchmarks/bench_train_selfplay.py selfplay --configs tuned paper --minutes 10
 
-``selfplay`` runs ``pecli selfplay`` for each config of ``--configs`` (default: tuned and paper) and each seed
-until it has used ``--minutes`` of CPU time (or finished its rounds), stopping it with SIGTERM (finished turns
-are kept; ``--resume`` continues them to the same cap), then plays each pair of configs' final
-checkpoints against each other, ``--episodes`` games: the first config's pursuer against the second's
-evader and vice versa.
+``selfplay`` runs ``pecli selfplay --cpu-hours`` for each config of ``--configs`` (default: tuned and paper) and
+each seed until its finished turns have used ``--minutes`` of CPU time (or it finished its rounds; a stopped run
+is resumed to the same budget), then plays each pair of configs' final checkpoints against each other,
+``--episodes`` games: the first config's pursuer against the second's evader and vice versa.
 """
 
 from __future__ import annotations
@@ -14,16 +13,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # the runs inherit it
 
-from pecli.process import cpu_seconds  # noqa: E402
 from pecli.records import Turn  # noqa: E402
+from pecli.rl.fork import run_cpu_hours  # noqa: E402
 from pecli.rl.handover import STATE_FILE  # noqa: E402
 from pecli.rl.state import read_state_file  # noqa: E402
 
@@ -37,44 +34,20 @@ def _turns(run: Path) -> list[Turn]:
     return read_state_file(state).turns if state.is_file() else []
 
 
-def _done(run: Path, minutes: float) -> bool:
-    """Whether ``run`` played all its rounds, or was stopped at a cap of ``minutes`` or more (its ``done`` file)."""
-    marker = run / "done"
-    if not marker.is_file():
-        return False
-    text = marker.read_text().strip()
-    try:
-        return float(text) >= minutes
-    except ValueError:  # "all rounds" (or an empty marker of an older benchmark)
-        return True
-
-
 def selfplay(args: argparse.Namespace) -> None:
-    """Self-play per config and seed to a CPU cap, then the configs' final players against each other."""
+    """Self-play per config and seed to a CPU budget, then the configs' final players against each other."""
     SELFPLAY.mkdir(parents=True, exist_ok=True)
     for seed in args.seeds:
         for config in args.configs:
             run = SELFPLAY / f"{Path(config).stem}-s{seed}"
-            before = sum(t.cpu_seconds for t in _turns(run))  # earlier processes' finished turns
-            if before >= 60 * args.minutes or _done(run, args.minutes):
-                continue
             command = [sys.executable, "-m", "pecli", "selfplay", "--zoo", str(SELFPLAY), "--name", run.name, "-q"]
+            command += ["--cpu-hours", f"{args.minutes / 60}"]
             command += ["--resume"] if (run / STATE_FILE).exists() else ["-c", config, "--seed", str(seed)]
-            print("started:", " ".join(command[1:]), flush=True)
-            process = subprocess.Popen(command, cwd=ROOT)
-            capped = False
-            while process.poll() is None:
-                time.sleep(5)
-                if process.poll() is None and before + cpu_seconds(process.pid) >= 60 * args.minutes:
-                    process.send_signal(signal.SIGTERM)  # keeps the finished turns
-                    process.wait()
-                    capped = True
-            if process.returncode == 0 or capped:
-                # played all its rounds, or reached the cap (its finished turns may sum to a little less:
-                # a later call with the same cap must not resume it, or it would train past it bit by bit)
-                (run / "done").write_text("all rounds\n" if process.returncode == 0 else f"{args.minutes}\n")
-            used = sum(t.cpu_seconds for t in _turns(run))
-            print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used / 60:.1f} CPU-minutes (turns)", flush=True)
+            if run_cpu_hours(run) * 60 < args.minutes:
+                print("started:", " ".join(command[1:]), flush=True)
+                subprocess.run(command, cwd=ROOT, check=True)
+            used = run_cpu_hours(run) * 60
+            print(f"{run.name}: {len(_turns(run)) // 2} rounds in {used:.1f} CPU-minutes (turns)", flush=True)
     print(
         f"| seed | {args.configs[0]} pursuer vs {args.configs[1]} evader | {args.configs[1]} pursuer vs "
         f"{args.configs[0]} evader | rounds |"

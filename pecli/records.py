@@ -140,6 +140,7 @@ class RatingRow(_Record):
     spec: str = Field(max_length=MAX_SPEC, pattern=NO_NUL)
     elo: float = Field(ge=1500 - MAX_ELO, le=1500 + MAX_ELO)
     stderr: float = Field(ge=0.0, le=MAX_ELO)
+    games: int | None = Field(default=None, ge=0, le=MAX_COUNT)  # absent from files of old versions
 
 
 class TournamentRecord(_Record):

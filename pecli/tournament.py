@@ -37,7 +37,7 @@ from pecli.policies import resolve_policy
 from pecli.policies.mix import player_label
 from pecli.policies.registry import BUILTINS, family_of
 from pecli.process import die_with, one_torch_thread
-from pecli.records import TournamentRecord, validated
+from pecli.records import PairingRow, TournamentRecord, validated
 from pecli.roles import ROLES, Role
 from pecli.scenario import Scenario
 from pecli.stats import Rating, bradley_terry, ties_with_best
@@ -47,7 +47,6 @@ from pecli.zoo import (
     CheckpointMeta,
     ZooError,
     checkpoint_problem,
-    finite_number,
     read_metadata,
     run_of,
 )
@@ -359,26 +358,18 @@ def play_pairing(
 
 
 def _cached(path: Path, pursuer: Player, evader: Player) -> PairingResult | None:
-    """A cached pairing result, or ``None`` if there is none or it is unreadable (then it is played again)."""
+    """A cached pairing result, or ``None`` if there is none or it is not what a pairing can give (then it is
+    played again)."""
     if not path.is_file():
         return None
     try:
         data = read_json(path, "cached pairing", max_bytes=MAX_PAIRING_BYTES)
-        result = PairingResult(**{**data, "pursuer": pursuer.name, "evader": evader.name})
-    except (PecliError, TypeError):
+        if not isinstance(data, dict):
+            return None
+        row = validated(PairingRow, {**data, "pursuer": pursuer.name, "evader": evader.name}, path, "cached pairing")
+    except PecliError:
         return None
-    numbers = (result.episodes, result.captures, result.time_to_capture_mean, result.time_to_capture_std)
-    if (
-        not all(finite_number(x) for x in numbers)
-        or not isinstance(result.episodes, int)
-        or not isinstance(result.captures, int)
-        or not 0 <= result.captures <= result.episodes
-        or result.episodes < 1
-        or not 0 <= result.time_to_capture_mean <= 1
-        or not 0 <= result.time_to_capture_std <= 1
-    ):
-        return None  # not what a pairing can give: played again
-    return result
+    return PairingResult(**row.model_dump())
 
 
 def pairings_cache(folder: Path, *within: str) -> Path:

@@ -25,11 +25,11 @@ from pecli.experiment.spec import SELFPLAY_SCHEDULES, LoadedExperiment
 from pecli.io import atomic_write_json, atomic_write_text, read_json
 from pecli.metagame import solve
 from pecli.policies.mix import first_member
-from pecli.records import KeptRecord, TournamentRecord, validated
+from pecli.records import KeptRecord, PairingRow, TournamentRecord, validated
 from pecli.reports import PAPER_TABLE_I, PAPER_TABLE_II, heatmap, is_hj_spec
 from pecli.roles import ROLES, Role, opponent_of
 from pecli.stats import Rating, interquartile_mean, stratified_bootstrap_interval, ties_with_best
-from pecli.tournament import PairingResult, Player, TournamentResults, rate
+from pecli.tournament import RESULTS_FILE, PairingResult, Player, TournamentResults, rate, read_results
 
 PAPER_EPISODES = 1500  # per cell: 3 models x 500 episodes (paper section V-B)
 
@@ -72,13 +72,13 @@ class Cell:
         return data
 
 
-def pool(pursuer: str, evader: str, results: Iterable[dict[str, Any]]) -> Cell:
+def pool(pursuer: str, evader: str, results: Iterable[PairingRow]) -> Cell:
     """Pool pairings: episodes and captures add up; the time's mean and σ are those of all episodes together."""
     rows = list(results)
-    n = sum(r["episodes"] for r in rows)
-    mean = sum(r["episodes"] * r["time_to_capture_mean"] for r in rows) / n
-    second = sum(r["episodes"] * (r["time_to_capture_std"] ** 2 + r["time_to_capture_mean"] ** 2) for r in rows) / n
-    return Cell(pursuer, evader, n, sum(r["captures"] for r in rows), mean, max(second - mean**2, 0.0) ** 0.5)
+    n = sum(r.episodes for r in rows)
+    mean = sum(r.episodes * r.time_to_capture_mean for r in rows) / n
+    second = sum(r.episodes * (r.time_to_capture_std**2 + r.time_to_capture_mean**2) for r in rows) / n
+    return Cell(pursuer, evader, n, sum(r.captures for r in rows), mean, max(second - mean**2, 0.0) ** 0.5)
 
 
 class ExperimentReport:
@@ -89,16 +89,15 @@ class ExperimentReport:
         self.experiment: LoadedExperiment = open_experiment(out)
         self.table = self.experiment.spec.report.table
         try:
-            if not (out / "tournament" / "results.json").is_file() or not (out / KEPT_FILE).is_file():
+            if not (out / "tournament" / RESULTS_FILE).is_file() or not (out / KEPT_FILE).is_file():
                 raise FileNotFoundError
-            self.data = read_json(out / "tournament" / "results.json", "tournament's results")
             kept = read_json(out / KEPT_FILE, "record of kept checkpoints")
         except FileNotFoundError:
             raise PecliError(
                 f"{out}: the experiment has not reached its tournament yet "
                 "(`pecli experiment status` says how far it got)"
             ) from None
-        validated(TournamentRecord, self.data, out / "tournament" / "results.json", "tournament's results")
+        self.record: TournamentRecord = read_results(out / "tournament")
         validated(KeptRecord, kept, out / KEPT_FILE, "record of kept checkpoints")
         runs = {run.name: run for run in self.experiment.runs()}
         one_schedule = len(self.experiment.spec.runs.schedules) == 1  # then a kind's group is the paper's kind
@@ -117,11 +116,11 @@ class ExperimentReport:
         self.ours_single = self.table == "II" and len(set(learned)) == 1
         self.groups: dict[Role, list[str]] = {role: [] for role in ROLES}
         self.player_group: dict[str, str] = {}
-        for rating in self.data["ratings"]:
-            group = self._group(rating["spec"], rating["name"])
-            self.player_group[rating["name"]] = group
-            if group not in self.groups[rating["role"]]:
-                self.groups[rating["role"]].append(group)
+        for rating in self.record.ratings:
+            group = self._group(rating.spec, rating.name)
+            self.player_group[rating.name] = group
+            if group not in self.groups[rating.role]:
+                self.groups[rating.role].append(group)
         for role in ROLES:
             order = self._order(role)
             self.groups[role].sort(key=lambda g: (order.index(g) if g in order else len(order), g))
@@ -143,9 +142,9 @@ class ExperimentReport:
         return TABLE_I_ORDER[role]
 
     def _cells(self) -> list[Cell]:
-        grouped: dict[tuple[str, str], list[dict[str, Any]]] = {}
-        for r in self.data["pairings"]:
-            key = (self.player_group[r["pursuer"]], self.player_group[r["evader"]])
+        grouped: dict[tuple[str, str], list[PairingRow]] = {}
+        for r in self.record.pairings:
+            key = (self.player_group[r.pursuer], self.player_group[r.evader])
             grouped.setdefault(key, []).append(r)
         cells = {key: pool(*key, rows) for key, rows in grouped.items()}
         for evader in self.groups["evader"]:
@@ -172,8 +171,8 @@ class ExperimentReport:
             players=players,
             pairings=pairings,
             ratings=[r for _, _, r in self.group_ratings()],
-            episodes=self.data["episodes_per_seed"],
-            seeds=self.data["seeds"],
+            episodes=self.record.episodes_per_seed,
+            seeds=self.record.seeds,
         )
 
     def group_ratings(self) -> list[tuple[str, Role, Rating]]:
@@ -198,12 +197,8 @@ class ExperimentReport:
     def exploitability(self) -> dict[str, float]:
         """Each player's exploitability within the tournament (:mod:`pecli.metagame`): how far the tournament's best
         reply moves its capture rate past the meta-game's value; empty if a pairing was not played."""
-        names = {role: [r["name"] for r in self.data["ratings"] if r["role"] == role] for role in ROLES}
-        rates = {
-            (r["pursuer"], r["evader"]): r["captures"] / r["episodes"]
-            for r in self.data["pairings"]
-            if isinstance(r.get("episodes"), int) and r["episodes"] > 0
-        }
+        names = {role: [r.name for r in self.record.ratings if r.role == role] for role in ROLES}
+        rates = {(r.pursuer, r.evader): r.captures / r.episodes for r in self.record.pairings}
         if not all(names.values()) or any((p, e) not in rates for p in names["pursuer"] for e in names["evader"]):
             return {}
         matrix = np.array([[rates[p, e] for e in names["evader"]] for p in names["pursuer"]])
@@ -214,21 +209,17 @@ class ExperimentReport:
         the other side (captures for pursuers, escapes for evaders) with a 95 % stratified-bootstrap interval
         (players resampled within each opposing group), as rliable reports an algorithm over runs and tasks."""
         totals: dict[tuple[str, str], list[int]] = {}  # (player, opposing group) -> [captures, episodes]
-        for r in self.data["pairings"]:
-            for player, other in ((r["pursuer"], r["evader"]), (r["evader"], r["pursuer"])):
+        for r in self.record.pairings:
+            for player, other in ((r.pursuer, r.evader), (r.evader, r.pursuer)):
                 entry = totals.setdefault((player, self.player_group[other]), [0, 0])
-                entry[0] += r["captures"]
-                entry[1] += r["episodes"]
+                entry[0] += r.captures
+                entry[1] += r.episodes
         learned = set(self.group_of_spec.values()) if not self.ours_single else {"ours"}
         rows = []
         for role in ROLES:
             opponents = self.groups[opponent_of(role)]
             for group in (g for g in self.groups[role] if g in learned):
-                players = [
-                    r["name"]
-                    for r in self.data["ratings"]
-                    if r["role"] == role and self.player_group[r["name"]] == group
-                ]
+                players = [r.name for r in self.record.ratings if r.role == role and self.player_group[r.name] == group]
                 if not players or any((p, o) not in totals for p in players for o in opponents):
                     continue  # a model that did not meet every group: no interval over groups
                 rates = np.array([[c / n for c, n in (totals[(p, o)] for o in opponents)] for p in players])
@@ -249,13 +240,13 @@ class ExperimentReport:
         if self.table != "I":
             return []
         faced: Faced = {}
-        for r in self.data["pairings"]:
-            captures, games = faced.setdefault(r["pursuer"], {}).get(r["evader"], (0, 0))
-            faced[r["pursuer"]][r["evader"]] = (captures + r["captures"], games + r["episodes"])
+        for r in self.record.pairings:
+            captures, games = faced.setdefault(r.pursuer, {}).get(r.evader, (0, 0))
+            faced[r.pursuer][r.evader] = (captures + r.captures, games + r.episodes)
         members: dict[str, list[str]] = {}  # each learned group's pursuers
-        for r in self.data["ratings"]:
-            if r["name"] in faced and r["spec"] in self.group_of_spec:
-                members.setdefault(self.player_group[r["name"]], []).append(r["name"])
+        for rating in self.record.ratings:
+            if rating.name in faced and rating.spec in self.group_of_spec:
+                members.setdefault(self.player_group[rating.name], []).append(rating.name)
         if BASE_KIND not in members:
             return []
         rows = []
@@ -322,7 +313,7 @@ class ExperimentReport:
             "",
             f"Scenario `{self.experiment.scenario.name}`; runs: {len(grid.kinds)} kinds × {len(grid.seeds)} seeds "
             f"({', '.join(grid.schedules)}), {budget}. {self._ranking_text()} Tournament: "
-            f"{self.data['episodes_per_seed']} episodes × {len(self.data['seeds'])} seeds per pairing.",
+            f"{self.record.episodes_per_seed} episodes × {len(self.record.seeds)} seeds per pairing.",
             "",
             "## Capture rate: ours / the paper's (difference)",
             "",
@@ -358,11 +349,11 @@ class ExperimentReport:
             "| # | player | group | role | rating | ± se | exploitability |",
             "| ---: | --- | --- | --- | ---: | ---: | ---: |",
         ]
-        for rank, r in enumerate(self.data["ratings"], start=1):
-            value = exploitability.get(r["name"])
+        for rank, rating in enumerate(self.record.ratings, start=1):
+            value = exploitability.get(rating.name)
             lines.append(
-                f"| {rank} | {r['name']} | {self.player_group[r['name']]} | {r['role']} | {r['elo']:.0f} | "
-                f"{r['stderr']:.0f} | {'-' if value is None else f'{value:.2f}'} |"
+                f"| {rank} | {rating.name} | {self.player_group[rating.name]} | {rating.role} | {rating.elo:.0f} | "
+                f"{rating.stderr:.0f} | {'-' if value is None else f'{value:.2f}'} |"
             )
         lines += self._exploit_lines()
         lines += ["", "![capture rate per cell](table.png)", ""]
@@ -490,8 +481,8 @@ class ExperimentReport:
             "ordering": self.ordering(),
             "best_responses": self.best_responses(),
             "ratings": [
-                {**r, "group": self.player_group[r["name"]], "exploitability": exploitability.get(r["name"])}
-                for r in self.data["ratings"]
+                {**r.model_dump(), "group": self.player_group[r.name], "exploitability": exploitability.get(r.name)}
+                for r in self.record.ratings
             ],
         }
 

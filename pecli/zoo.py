@@ -54,7 +54,9 @@ BEST = "best"  # the checkpoint with the run's best evaluation (with eval_every)
 CONFIG_FILE = "config.yaml"  # per run: the resolved scenario it was started with
 COMMAND_FILE = "command.txt"  # per run: every command that started or resumed it
 AVERAGE_FILE = "average.zip"  # per self-play main learner: the mean of its last rounds, what the run hands over
-JOB_FILE = "run.json"
+JOB_FILE = "run.json"  # per run of `pecli train`: its command, role, opponent and seed
+SELFPLAY_FILE = "selfplay.json"  # per self-play run: its turns, pools and records (pecli.rl.state)
+RUN_MARKS = (COMMAND_FILE, JOB_FILE, SELFPLAY_FILE)  # what pecli writes into every run folder it makes
 MAX_METADATA_BYTES = 16 << 20  # a checkpoint's .json: its opponents' records make it grow with a self-play pool
 RESUME_DIR = "resume"  # per role: the learner's durable state (pecli.rl.durable)
 

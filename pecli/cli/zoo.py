@@ -120,12 +120,9 @@ def _scenario_of(checkpoint: Path, meta: CheckpointMeta) -> Scenario | None:
     return None
 
 
-RUN_MARKS = ("command.txt", "run.json", "selfplay.json")  # what pecli writes into every run folder it makes
-
-
 def _is_run(folder: Path) -> bool:
     """Whether ``folder`` is a run folder pecli made."""
-    from pecli.zoo import CONFIG_FILE
+    from pecli.zoo import CONFIG_FILE, RUN_MARKS
 
     return (folder / CONFIG_FILE).is_file() and any((folder / mark).is_file() for mark in RUN_MARKS)
 
@@ -142,7 +139,7 @@ def remove(
     checkpoint zip (its metadata beside it, a checkpoint's entries inside, or, damaged, in a run's role folder).
     """
     from pecli.locks import locked
-    from pecli.zoo import ZooError, checkpoint_problem, metadata_path, read_metadata
+    from pecli.zoo import RUN_MARKS, ZooError, checkpoint_problem, metadata_path, read_metadata
 
     if target.is_dir():
         if not _is_run(target):
@@ -350,7 +347,7 @@ def generations(
     """
     from pecli.cli.common import require_batch
     from pecli.rl.generations import GENERATIONS_DIR, draw_heatmap, round_robin
-    from pecli.zoo import Run
+    from pecli.zoo import RUN_MARKS, Run
 
     require_batch(episodes, "add --seeds instead")
     if not _is_run(run):

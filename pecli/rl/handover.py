@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from pecli.rl.pool import MAIN
 from pecli.roles import ROLES, Role
-from pecli.zoo import AVERAGE_FILE, ZooError, read_metadata
+from pecli.zoo import AVERAGE_FILE, SELFPLAY_FILE, ZooError, read_metadata
 
 if TYPE_CHECKING:
     from pecli.scenario import Scenario
 
-STATE_FILE = "selfplay.json"  # a self-play run's state: its turns, pools and records
+STATE_FILE = SELFPLAY_FILE  # a self-play run's state: its turns, pools and records
 
 Turns = Sequence[Mapping[str, Any]]
 

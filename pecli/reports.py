@@ -211,7 +211,9 @@ def nash_table(game: MetaGame, limit: int | None = None) -> Table:
         )
     table = Table(
         title=title,
-        caption="exploitability: how far the zoo's best reply to the player moves its capture rate past "
+        caption=f"the pursuer mixture is held to {game.pursuer_held_to:.3f} by the zoo's strongest evader against "
+        f"it, the evader mixture caught {game.evader_caught_at_most:.3f} by its strongest pursuer; "
+        "exploitability: how far the zoo's best reply to the player moves its capture rate past "
         "the value (0: the player is an equilibrium strategy)",
     )
     for column, justify in (

@@ -101,6 +101,7 @@ def test_tournament_nash_writes_a_mixture_that_plays_as_one_player(
     assert set(weights) <= {"pure-pursuit", "interceptor"} and sum(weights.values()) == pytest.approx(1.0)
     assert set(record["exploitability"]) == {"pure-pursuit", "interceptor", "greedy", "hider", "corner-sitter"}
     assert record["solvers"] == {"pursuer": "nash", "evader": "nash"}
+    assert record["held_to"]["pursuer"] == pytest.approx(record["value"], abs=1e-6)  # the equilibrium's: the value
     mixture = resolve_policy(f"nash:{out}", "evader", quick, seed=0)
     assert sorted(mixture.names) == sorted(m["name"] for m in record["evader"])
     played = runner.invoke(
@@ -169,6 +170,18 @@ def test_nash_conv_is_what_the_best_replies_gain_on_a_pair_of_mixtures() -> None
     assert pure == pytest.approx(0.9 - 0.2)  # the best pursuer against x catches 0.9; the best evader holds a to 0.2
     game = solve(["a", "b"], ["x", "y"], m)
     assert nash_conv(m, game.pursuer_mixture, game.evader_mixture) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_a_mixture_is_held_to_what_the_zoos_strongest_reply_gives_it() -> None:
+    m = np.array([[0.9, 0.2, 0.5], [0.1, 0.8, 0.5]])
+    game = solve(["p0", "p1"], ["e0", "e1", "e2"], m)
+    assert game.pursuer_held_to == pytest.approx(game.value) == pytest.approx(game.evader_caught_at_most)
+    uniform = with_meta_solvers(game, "uniform", "last")
+    assert uniform.pursuer_held_to == pytest.approx(0.5)  # (0.5, 0.5, 0.5): every evader alike
+    assert uniform.evader_caught_at_most == pytest.approx(0.5)  # e2 alone: 0.5 by either pursuer
+    newest = with_meta_solvers(game, "last", "uniform")
+    assert newest.pursuer_held_to == pytest.approx(0.1)  # p1 alone: e0 holds it to 0.1
+    assert newest.evader_caught_at_most == pytest.approx(max(1.6 / 3, 1.4 / 3))
 
 
 def test_a_meta_solver_picks_the_mixture_and_leaves_the_equilibriums_measures() -> None:

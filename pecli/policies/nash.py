@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -26,6 +26,7 @@ from pecli.scenario import Scenario
 
 NASH_FILE = "nash.json"
 MAX_MEMBERS = 10_000
+Rate = Annotated[float, Field(ge=0.0, le=1.0)]
 
 
 class _Record(BaseModel):
@@ -50,6 +51,7 @@ class NashRecord(_Record):
     pursuer: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     evader: list[Member] = Field(min_length=1, max_length=MAX_MEMBERS)
     exploitability: dict[str, float] = Field(default_factory=dict, max_length=2 * MAX_MEMBERS)
+    held_to: dict[Role, Rate] = Field(default_factory=dict)  # each mixture against the zoo's strongest reply
     solvers: dict[Role, MetaSolver] = Field(default_factory=lambda: {"pursuer": "nash", "evader": "nash"})
     slack: float | None = Field(default=None, gt=0.0, le=1.0)  # a maxent mixture's, below the value
 
@@ -76,6 +78,7 @@ def mixture_record(scenario: Scenario, game: MetaGame, specs: Mapping[str, str])
         "pursuer": members("pursuer"),
         "evader": members("evader"),
         "exploitability": game.exploitability(),
+        "held_to": {"pursuer": game.pursuer_held_to, "evader": game.evader_caught_at_most},
         "solvers": {"pursuer": game.pursuer_solver, "evader": game.evader_solver},
         "slack": game.slack,
     }

@@ -80,22 +80,31 @@ def file_digest(path: str | Path, length: int = 20) -> str:
 MAX_RECORD_BYTES = 64 << 20  # a JSON record pecli reads back: results, mixtures, best-response summaries
 
 
-def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) -> Any:
-    """The JSON in ``path``, read as data: :class:`~pecli.errors.PecliError` (one line naming ``what``) if it is
-    missing, larger than ``max_bytes``, not JSON or nested too deep to parse."""
+def read_bounded(path: Path, what: str, max_bytes: int) -> bytes:
+    """The bytes of the regular file ``path`` (a link to one is followed): :class:`~pecli.errors.PecliError` in one
+    line naming ``what`` if it is something else (a FIFO would block, a device never end) or holds more than
+    ``max_bytes``, whatever size the file system reports; :class:`OSError` if it cannot be read."""
     import stat
 
     from pecli.errors import PecliError
 
+    if not stat.S_ISREG(path.stat().st_mode):
+        raise PecliError(f"{path}: not a regular file, so no {what}")
+    with path.open("rb") as handle:
+        data = handle.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise PecliError(f"{path}: more bytes than {article(what)} can be ({max_bytes:,})")
+    return data
+
+
+def read_json(path: str | Path, what: str, max_bytes: int = MAX_RECORD_BYTES) -> Any:
+    """The JSON in ``path``, read as data: :class:`~pecli.errors.PecliError` (one line naming ``what``) if it is
+    missing, larger than ``max_bytes``, not JSON or nested too deep to parse."""
+    from pecli.errors import PecliError
+
     path = Path(path)
     try:
-        if not stat.S_ISREG(path.stat().st_mode):  # a FIFO would block, a device never end
-            raise PecliError(f"{path}: not a regular file, so no {what}")
-        with path.open("rb") as handle:
-            data = handle.read(max_bytes + 1)  # bounded whatever the size the file system reports
-        if len(data) > max_bytes:
-            raise PecliError(f"{path}: more bytes than {article(what)} can be ({max_bytes:,})")
-        return json.loads(data.decode("utf-8"))
+        return json.loads(read_bounded(path, what, max_bytes).decode("utf-8"))
     except FileNotFoundError:
         raise PecliError(f"{path}: no {what} there") from None
     except (OSError, ValueError, RecursionError) as exc:  # ValueError: not JSON, or an integer of > 4300 digits

@@ -37,6 +37,8 @@ SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
 
 
 MAX_SIDECAR_BYTES = 1 << 20
+MAX_ARENA_BYTES = 2 << 30  # what the exported graphs of one process may hold at once: an export needs megabytes
+_arena: list[bool] = []  # one capped arena per process, made by the first model loaded
 
 
 def sidecar_path(model: str | Path) -> Path:
@@ -209,7 +211,8 @@ class ExportedModel:
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.log_severity_level = 3
+        options.log_severity_level = 4  # its failures reach the user as ExportError, not as log lines
+        _cap_memory(ort, options)
         try:
             session = ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own exception types for damaged graphs
@@ -249,7 +252,11 @@ class ExportedModel:
                 raise ValueError("this model has a mixed belief: pass its uniform and normal draws")
             feed["uniform"] = np.asarray(uniform, dtype=np.float32)
             feed["normal"] = np.asarray(normal, dtype=np.float32)
-        return dict(zip(self.outputs, self.session.run(self.outputs, feed)))
+        try:
+            values = self.session.run(self.outputs, feed)
+        except Exception as exc:  # onnxruntime's own types: a graph that fails, or asks past the arena's cap
+            raise ExportError(f"the exported graph failed to run: {_run_failure(str(exc))}") from None
+        return dict(zip(self.outputs, values))
 
     def sees(self, own: np.ndarray, opponent: np.ndarray) -> bool:
         """Whether this player's sensor sees ``opponent`` from ``own`` (SI states; the game's wedge test)."""
@@ -449,3 +456,32 @@ def _vector(values: Any, size: int, what: str) -> np.ndarray:
     if not np.isfinite(out).all():
         raise ValueError(f"{what} must be finite, got {out.tolist()}")
     return out
+
+
+def _cap_memory(ort: Any, options: Any) -> None:
+    """Make ``options``' session allocate from one CPU arena per process of at most :data:`MAX_ARENA_BYTES`.
+
+    A graph's shapes may be computed at run time from its inputs, past what :func:`check_graph` can bound (a
+    ``ConstantOfShape`` of the input's shape joined to large constants): with the cap such a graph fails its
+    allocation, one line, instead of taking the machine's memory.
+    """
+    if not hasattr(ort, "create_and_register_allocator"):  # an onnxruntime older than 1.9: no cap to set
+        return
+    if not _arena:
+        info = ort.OrtMemoryInfo("Cpu", ort.OrtAllocatorType.ORT_ARENA_ALLOCATOR, 0, ort.OrtMemType.DEFAULT)
+        ort.create_and_register_allocator(
+            info, ort.OrtArenaCfg({"max_mem": MAX_ARENA_BYTES, "arena_extend_strategy": 1})
+        )
+        ort.set_default_logger_severity(4)
+        _arena.append(True)
+    options.add_session_config_entry("session.use_env_allocators", "1")
+
+
+def _run_failure(message: str) -> str:
+    """onnxruntime's report of a failed run, in one line: the bytes asked for, where the arena's cap refused them."""
+    import re
+
+    asked = re.search(r"requested bytes of (\d+)", message)
+    if asked is not None:
+        return f"it asked for {int(asked.group(1)):,} bytes, more than exported graphs may hold ({MAX_ARENA_BYTES:,})"
+    return " ".join(message.split())[:300]

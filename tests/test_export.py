@@ -552,6 +552,29 @@ def test_the_ros2_example_is_valid_python() -> None:
     assert "from pecli.runtime import Controller" in source and "create_timer" in source
 
 
+def test_a_graph_that_asks_for_memory_at_run_time_fails_in_one_line(exports) -> None:
+    """Sizes computed at run time from the input's shape pass the graph check (an export's own are so computed);
+    the arena's cap refuses the allocation of a graph that joins large constants to them."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    _, model = exports["none"]
+    graph = onnx.load(model)
+    graph.graph.initializer.extend(numpy_helper.from_array(np.array([n], np.int64), f"big{n}") for n in (4096, 8192))
+    graph.graph.node.extend(
+        [
+            helper.make_node("Shape", ["obs"], ["obs_shape"]),
+            helper.make_node("Concat", ["obs_shape", "big4096", "big8192"], ["huge_shape"], axis=0),
+            helper.make_node("ConstantOfShape", ["huge_shape"], ["huge"]),
+            helper.make_node("ReduceSum", ["huge"], ["huge_sum"], keepdims=0),
+        ]
+    )
+    graph.graph.output.append(helper.make_tensor_value_info("huge_sum", TensorProto.FLOAT, None))
+    loaded = ExportedModel.from_bytes(graph.SerializeToString(), json.loads(sidecar_path(model).read_text()))
+    with pytest.raises(ExportError, match=r"it asked for [\d,]+ bytes, more than exported graphs may hold") as failed:
+        loaded.run(np.zeros((1, loaded.frame_stack, loaded.dim)))
+    assert "\n" not in str(failed.value)
+
+
 def test_exported_policies_are_policies(exports, quick: Scenario) -> None:
     _, model = exports["none"]
     policy = resolve_policy(str(model), "pursuer", quick)

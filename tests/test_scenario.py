@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import pytest
@@ -10,7 +11,7 @@ import yaml
 from conftest import BUILTINS
 
 from pecli.errors import ConfigError
-from pecli.scenario import builtin_config_dir, load_scenario, parse_angle
+from pecli.scenario import builtin_config_dir, load_scenario, parse_angle, read_yaml
 
 
 @pytest.mark.parametrize("name", BUILTINS)
@@ -184,6 +185,29 @@ def test_duplicate_keys_are_refused_with_their_lines(tmp_path: Path) -> None:
     nested = (builtin_config_dir() / "quick.yaml").read_text().replace("range: 6.0, fov", "range: 6.0, range: 7.0, fov")
     with pytest.raises(ConfigError, match=r"duplicate key 'range'"):
         load_scenario(write(tmp_path, nested))
+
+
+def test_aliases_that_expand_past_any_config_and_files_that_never_end_are_refused(tmp_path: Path) -> None:
+    """A page of nested aliases stands for billions of values, a link to /dev/zero or a FIFO for a file that never
+    ends or never opens: each is refused in one line, before anything walks it."""
+    lines = ["d0: &d0 {a: 1, b: 2}"]
+    lines += [f"d{i}: &d{i} {{" + ", ".join(f"k{j}: *d{i - 1}" for j in range(8)) + "}" for i in range(1, 12)]
+    with pytest.raises(ConfigError, match="more than 100,000 values once its aliases are expanded"):
+        load_scenario(write(tmp_path, "\n".join(lines)))
+    with pytest.raises(ConfigError, match="an alias that contains itself"):
+        load_scenario(write(tmp_path, "a: &a [1, *a]\n"))
+    endless = tmp_path / "endless.yaml"
+    endless.symlink_to("/dev/zero")
+    with pytest.raises(ConfigError, match="endless.yaml: not a regular file"):
+        read_yaml(endless)
+    blocking = tmp_path / "blocking.yaml"
+    os.mkfifo(blocking)
+    with pytest.raises(ConfigError, match="blocking.yaml: not a regular file"):
+        read_yaml(blocking)
+    big = tmp_path / "big.yaml"
+    big.write_text("x: 1\n" + "#" * (1 << 20))
+    with pytest.raises(ConfigError, match="more bytes than a configuration file can be"):
+        read_yaml(big)
 
 
 def test_merge_keys_may_override(tmp_path: Path) -> None:

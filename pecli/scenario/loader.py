@@ -9,7 +9,8 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from pecli.errors import ConfigError
+from pecli.errors import ConfigError, PecliError
+from pecli.io import read_bounded
 from pecli.scenario.resources import check_resources
 from pecli.scenario.schema import Scenario
 
@@ -151,20 +152,49 @@ class StrictLoader(yaml.SafeLoader):
             first_line[key] = key_node.start_mark.line + 1
         return super().construct_mapping(node, deep=deep)
 
+    def construct_document(self, node: yaml.Node) -> Any:
+        if _expanded_size(node, {}) > MAX_VALUES:  # aliases repeat what they name: '&a [*b, *b]' doubles *b
+            raise yaml.constructor.ConstructorError(
+                None, None, f"more than {MAX_VALUES:,} values once its aliases are expanded", node.start_mark
+            )
+        return super().construct_document(node)
+
 
 MAX_FILE_BYTES = 1 << 20  # a scenario or experiment file is a page of YAML
+MAX_VALUES = 100_000  # scalars, lists and mappings a configuration holds with its aliases expanded
+
+
+def _expanded_size(node: yaml.Node, sizes: dict[int, int]) -> int:
+    """How many nodes ``node`` stands for with every alias expanded: each node counted once per place it is
+    named, computed once per node (``sizes``), so a document of nested aliases costs its size, not its expansion."""
+    known = sizes.get(id(node))
+    if known is not None:
+        if known < 0:
+            raise yaml.constructor.ConstructorError(None, None, "an alias that contains itself", node.start_mark)
+        return known
+    sizes[id(node)] = -1  # being counted
+    if isinstance(node, yaml.MappingNode):
+        children = [child for pair in node.value for child in pair]
+    elif isinstance(node, yaml.SequenceNode):
+        children = list(node.value)
+    else:
+        children = []
+    total = 1
+    for child in children:
+        total = min(total + _expanded_size(child, sizes), MAX_VALUES + 1)
+    sizes[id(node)] = total
+    return total
 
 
 def read_yaml(path: Path) -> Any:
     """The content of the YAML file ``path`` (safe, duplicate keys refused); :class:`ConfigError` in one
-    line (with the line number) if it cannot be read."""
+    line (with the line number) if it cannot be read, or if it is not a regular file of at most
+    :data:`MAX_FILE_BYTES` holding at most :data:`MAX_VALUES` values."""
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise ConfigError(
-                f"{path}: {path.stat().st_size:,} bytes is too large for a configuration file "
-                f"(at most {MAX_FILE_BYTES:,})"
-            )
-        return yaml.load(path.read_text(), Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
+        text = read_bounded(path, "configuration file", MAX_FILE_BYTES).decode("utf-8")
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader)
+    except PecliError as exc:
+        raise ConfigError(str(exc)) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""

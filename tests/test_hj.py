@@ -462,6 +462,11 @@ def test_empty_and_non_finite_solutions_are_refused_in_one_line(
     broken.values[0, 0, 3] = np.nan
     with pytest.raises(SolutionError, match="not all finite"):
         Solution.load(broken.save(tmp_path / "nan.npz"))
+    bomb = tmp_path / "bomb.npz"  # a few kilobytes that unpack to 64 MiB: refused before they are
+    with np.load(arena.save(tmp_path / "whole.npz")) as whole:
+        np.savez_compressed(bomb, values=np.zeros(1 << 23), meta=whole["meta"])
+    with pytest.raises(SolutionError, match="values.npy unpacks to 67,108,992 bytes, more than its grid holds"):
+        Solution.load(bomb)
     problem = Problem.for_scenario(point_mass, "abs8d", (5, 3), steps=3)
     cached = cache_path(problem)
     cached.parent.mkdir(parents=True)

@@ -600,6 +600,54 @@ def test_weights_that_unpack_beyond_the_limit_are_not_read(
         resolve_policy(str(zoo / "run" / "pursuer" / "final.zip"), "pursuer", quick)
 
 
+def test_weights_that_unpack_past_the_network_their_metadata_describes_are_not_read(
+    zoo: Path, tmp_path: Path, quick: Scenario
+) -> None:
+    from pecli.errors import PolicyError
+
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo, copy)
+    checkpoint = copy / "run" / "pursuer" / "final.zip"
+    with zipfile.ZipFile(checkpoint) as archive:
+        entries = {name: archive.read(name) for name in archive.namelist()}
+    entries["policy.pth"] = bytes(64 << 20)  # 64 MiB of zeros: a few kilobytes compressed
+    with zipfile.ZipFile(checkpoint, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in entries.items():
+            archive.writestr(name, data)
+    assert checkpoint.stat().st_size < 1 << 20
+    with pytest.raises(PolicyError, match="its weights unpack to 67,108,864 bytes, more than the network its"):
+        resolve_policy(str(checkpoint), "pursuer", quick)
+
+
+def test_weights_that_are_no_pickle_are_damaged_whatever_the_trust(
+    zoo: Path, tmp_path: Path, quick: Scenario, monkeypatch
+) -> None:
+    from pecli.errors import PolicyError
+
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo, copy)
+    checkpoint = copy / "run" / "pursuer" / "final.zip"
+    rewrite_zip(checkpoint, {"policy.pth": b"garbage" * 100})
+    for trust in ("0", "1"):
+        monkeypatch.setenv("PECLI_TRUST", trust)
+        with pytest.raises(PolicyError, match="damaged \\(not what torch.save writes\\)"):
+            resolve_policy(str(checkpoint), "pursuer", quick)
+
+
+def test_a_checkpoint_that_is_not_a_regular_file_is_not_opened(tmp_path: Path, quick: Scenario) -> None:
+    import os
+
+    from pecli.errors import PolicyError
+    from pecli.rl.state import round_of
+
+    fifo = tmp_path / "round-001.zip"
+    os.mkfifo(fifo)  # opening it would wait for a writer forever
+    with pytest.raises(PolicyError, match="not a regular file"):
+        resolve_policy(str(fifo), "pursuer", quick)
+    assert round_of(Path("round-012.zip")) == 12
+    assert round_of(Path("round-\u00b2.zip")) is None  # a digit to str.isdigit, not to int()
+
+
 def test_averaging_copies_no_more_than_a_checkpoint_unpacks_to(zoo: Path, tmp_path: Path, monkeypatch) -> None:
     from pecli.rl import averaging
     from pecli.zoo import ZooError

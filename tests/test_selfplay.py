@@ -603,6 +603,11 @@ def test_generations_play_every_round_against_every_round(finished: tuple[Path, 
     from pecli.rl.generations import generation_checkpoints
 
     assert [p.stem for p in generation_checkpoints(run, every=2)["evader"]] == ["round-002"]  # the last kept
+    for suffix in (".zip", ".json"):  # a round that repeats an earlier one's bytes plays once, as the first
+        shutil.copy(run / "pursuer" / f"round-001{suffix}", run / "pursuer" / f"round-003{suffix}")
+    again = CliRunner().invoke(app, ["zoo", "generations", str(run), "-n", "4", "--json"])
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.stdout)["pursuers"] == ["pure-pursuit", "g1", "g2"]
 
 
 def test_progress_counts_later_generations_beating_older_opponents() -> None:

@@ -10,6 +10,7 @@ does not fit its grid or holds values that are not finite is refused with one li
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,6 +24,9 @@ from pecli.hj.grid import Grid
 from pecli.hj.problem import PointMassGame, Problem
 from pecli.io import atomic_path
 from pecli.scenario import Scenario
+
+MAX_META_BYTES = 1 << 20  # the solution's description: a problem and a few numbers, as JSON
+NPY_HEADER_BYTES = 1 << 12  # an .npy file's header before its array
 
 
 class SolutionError(PecliError):
@@ -108,11 +112,21 @@ class Solution:
         if not zipfile.is_zipfile(path):  # else NumPy reads it as a pickle and says to trust it
             raise SolutionError(f"{path}: not an HJ solution (not a .npz archive, or a truncated one)")
         try:
+            with zipfile.ZipFile(path) as archive:
+                sizes = {info.filename: info.file_size for info in archive.infolist()}
+            if sizes.get("meta.npy", 0) > MAX_META_BYTES:
+                raise ValueError(f"its meta unpacks to {sizes['meta.npy']:,} bytes")
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
+                problem = Problem.from_dict(meta.pop("problem"))
+                most = 8 * math.prod(problem.grid.shape) + NPY_HEADER_BYTES  # float64 values, uint steps
+                for name in ("values.npy", "capture_steps.npy"):  # checked before a few megabytes unpack to gigabytes
+                    if sizes.get(name, 0) > most:
+                        raise ValueError(
+                            f"{name} unpacks to {sizes[name]:,} bytes, more than its grid holds ({most:,})"
+                        )
                 values = data["values"]
                 steps = data["capture_steps"] if "capture_steps" in data.files else None
-            problem = Problem.from_dict(meta.pop("problem"))
         except (
             OSError,
             EOFError,

@@ -40,6 +40,7 @@ MAX_CRITICS = 64
 MAX_QUANTILES = 10_000
 BYTES_PER_WEIGHT = 4  # float32
 SMALL_NETWORK_BYTES = 16 << 20  # what building a network of any metadata may cost before its weights are checked
+WEIGHTS_PER_LEAST = 8  # policy.pth holds the networks with their targets and biases: about 3x least_weights
 
 
 def _mlp(widths: list[int], inputs: int = 1, outputs: int = 1) -> int:
@@ -83,8 +84,9 @@ def least_weights(meta: CheckpointMeta) -> int:
 
 
 def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
-    """:class:`ZooError` unless the checkpoint's ``policy.pth`` is no larger than :data:`MAX_WEIGHTS_BYTES` and
-    large enough for the network its metadata describes (read from the zip's directory, nothing unpacked)."""
+    """:class:`ZooError` unless the checkpoint's ``policy.pth`` unpacks to about what the network its metadata
+    describes holds: at least its weights, at most :data:`WEIGHTS_PER_LEAST` times them and a margin (read from
+    the zip's directory, nothing unpacked)."""
     try:
         with zipfile.ZipFile(path) as archive:
             size = archive.getinfo("policy.pth").file_size
@@ -101,6 +103,12 @@ def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
             f"{path}: its metadata describes a network of at least {least:,} bytes of weights, more "
             f"than its {size:,} bytes hold (edited or damaged metadata)"
         )
+    most = WEIGHTS_PER_LEAST * least + SMALL_NETWORK_BYTES
+    if size > most:  # a few compressed megabytes can unpack to gigabytes
+        raise ZooError(
+            f"{path}: its weights unpack to {size:,} bytes, more than the network its metadata describes holds "
+            f"({most:,} at most: edited or damaged)"
+        )
 
 
 def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cpu") -> Any:
@@ -116,9 +124,25 @@ def load_tensors(source: bytes | str | Path, name: str | Path, device: str = "cp
     except OSError as exc:
         raise ZooError(f"{name}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # torch refuses anything but tensors and plain containers with UnpicklingError
+        if isinstance(source, bytes) and not _pickle_or_zip(source):
+            raise ZooError(f"{name}: damaged (not what torch.save writes)") from None
         if "weights_only" in str(exc) or isinstance(exc, pickle.UnpicklingError):
             raise untrusted(name, "it holds pickled objects, not just tensors") from None
         raise ZooError(f"{name}: damaged ({type(exc).__name__}: {exc})") from None
+
+
+def _pickle_or_zip(data: bytes) -> bool:
+    """Whether ``data`` is a zip (torch.save's format) or a whole pickle stream: its opcodes are read, none run."""
+    import pickletools
+
+    if zipfile.is_zipfile(io.BytesIO(data)):
+        return True
+    try:
+        for _ in pickletools.genops(data):
+            pass
+    except Exception:  # pickletools' errors for bytes no pickle holds: ValueError, struct.error, ...
+        return False
+    return True
 
 
 def read_weights(

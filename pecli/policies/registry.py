@@ -253,6 +253,8 @@ def stored_scenario(spec: str) -> Scenario | None:
 
 
 def _load_file(path: Path, role: Role, scenario: Scenario, seed: int | None) -> Policy:
+    if not path.is_file():  # a FIFO would block its reader, a device never end
+        raise PolicyError(f"cannot load {path}: not a regular file")
     loader = _LOADERS.get(path.suffix.lower())
     if loader is None:
         kinds = ", ".join(sorted(_LOADERS)) or "none yet"

@@ -117,7 +117,7 @@ def checkpoint_name(round: int) -> str:
 def round_of(checkpoint: Path) -> int | None:
     """The round whose checkpoint ``checkpoint`` is (``round-003.zip`` → 3); ``None`` for any other name."""
     number = checkpoint.stem.removeprefix("round-")
-    return int(number) if checkpoint.stem != number and number.isdigit() else None
+    return int(number) if checkpoint.stem != number and number.isascii() and number.isdigit() else None
 
 
 def initial_state(scenario: Scenario, seed: int) -> SelfPlayState:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import re
 
 VOWEL_SOUNDS = "aeiou"
+CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")  # what drives a terminal; tab and newline are kept
 
 
 def article(word: str) -> str:
@@ -21,6 +23,12 @@ def shortened(value: object, most: int = 40) -> str:
     """``repr(value)`` as a message quotes it: cut to ``most`` characters, ``...`` marking the cut."""
     text = repr(value)
     return text if len(text) <= most else f"{text[: most - 3]}..."
+
+
+def printable(text: str) -> str:
+    """``text`` with its control characters written as ``\\xNN``: a name or spec read from a stranger's file,
+    quoted in a message, cannot move the cursor, clear the screen or retitle the terminal."""
+    return CONTROL.sub(lambda found: f"\\x{ord(found.group()):02x}", text)
 
 
 def cpu_time(seconds: float, budget: float | None = None) -> str:

@@ -705,6 +705,18 @@ def test_names_with_markup_print_as_text(tmp_path: Path) -> None:
     assert "z[/x]" in result.output
 
 
+def test_a_strangers_escape_codes_reach_the_terminal_written_out(zoo: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "zoo"
+    shutil.copytree(zoo, copy)
+    sidecar = copy / "run" / "pursuer" / "final.json"
+    meta = json.loads(sidecar.read_text())
+    sidecar.write_text(json.dumps({**meta, "scenario": "\x1b[2J\x1b]0;title\x07[red]x"}))
+    listed = runner.invoke(app, ["zoo", "list", str(copy)])
+    assert listed.exit_code == 0 and "\x1b" not in listed.output and "\\x1b[2J" in listed.output, listed.output
+    refused = runner.invoke(app, ["play", "-p", str(copy / "x\x1b]0;title\x07.zip"), "-e", "greedy"])
+    assert refused.exit_code == 1 and "x\\x1b]0;title\\x07.zip" in refused.output, refused.output
+
+
 def test_a_record_naming_a_file_that_is_not_there_imports_nothing(tmp_path: Path, quick: Scenario) -> None:
     """'this:x.zip' looks like a file; were it resolved, a missing file would be taken for module:Class."""
     from pecli.errors import PolicyError

@@ -13,9 +13,11 @@ import typer
 from rich.console import Console
 from rich.errors import MarkupError
 from rich.markup import escape
+from rich.text import Text
 
 from pecli.errors import PecliError
 from pecli.process import interrupt, one_torch_thread, sigterm_stops  # noqa: F401 (the commands import them here)
+from pecli.text import printable
 
 if TYPE_CHECKING:
     from pecli.scenario import Scenario
@@ -100,6 +102,12 @@ TrainConfigOption = Annotated[
 SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Seed: the same seed plays the same games.")]
 
 
+def shown(value: str, style: str = "") -> Text:
+    """A stranger's text (a run's name, a checkpoint's metadata) for a table cell: as plain text, with its control
+    characters written out, so that it is neither rich markup nor a terminal's escape codes."""
+    return Text(printable(value), style=style)
+
+
 def user_errors(command: F) -> F:
     """Turn a :class:`PecliError` or an ``OSError`` into one red line and exit code 1.
 
@@ -114,12 +122,14 @@ def user_errors(command: F) -> F:
         except (typer.Exit, typer.Abort, KeyboardInterrupt):
             raise
         except PecliError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+            err_console.print(f"[bold red]error:[/] {escape(printable(str(exc)))}", highlight=False, soft_wrap=True)
             raise typer.Exit(code=1) from None
         except OSError as exc:  # an unwritable output, a full disk, a path that is not there
             where = f"{exc.filename}: " if exc.filename else ""
             err_console.print(
-                f"[bold red]error:[/] {escape(f'{where}{exc.strerror or exc}')}", highlight=False, soft_wrap=True
+                f"[bold red]error:[/] {escape(printable(f'{where}{exc.strerror or exc}'))}",
+                highlight=False,
+                soft_wrap=True,
             )
             raise typer.Exit(code=1) from None
         except Exception as exc:
@@ -127,7 +137,7 @@ def user_errors(command: F) -> F:
                 traceback.print_exc()
                 raise typer.Exit(code=INTERNAL_ERROR_EXIT) from None
             err_console.print(
-                f"[bold red]internal error:[/] {type(exc).__name__}: {escape(str(exc))} "
+                f"[bold red]internal error:[/] {type(exc).__name__}: {escape(printable(str(exc)))} "
                 f"(set {DEBUG_VARIABLE}=1 to see the traceback, and please report it)",
                 highlight=False,
                 soft_wrap=True,

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from pecli.cli.common import TABLE_WIDTH, console, err_console, user_errors
+from pecli.cli.common import TABLE_WIDTH, console, err_console, shown, user_errors
 from pecli.cli.train import RoleChoice
 from pecli.errors import PecliError
 
@@ -49,19 +49,20 @@ def list_zoo(zoo: ZooArgument = Path("zoo")) -> None:
         for entry in checkpoints_in(run):
             meta = entry.meta
             if meta is None or entry.problem:
-                table.add_row(run.name, entry.path.parent.name, entry.path.stem, *[""] * 5, f"[red]{entry.problem}[/]")
+                problem = shown(str(entry.problem), style="red")
+                table.add_row(shown(run.name), entry.path.parent.name, shown(entry.path.stem), *[""] * 5, problem)
                 continue
             rated = ratings.get(str(entry.path.resolve()))
             rating = f"{rated['elo']:.0f} ± {rated['stderr']:.0f}" if rated else ""
             table.add_row(
-                run.name,
+                shown(run.name),
                 entry.path.parent.name,  # the folder: a league's exploiter-pursuer apart from its main pursuer
-                entry.path.stem,
+                shown(entry.path.stem),
                 f"{meta.steps:,}",
                 str(meta.episodes),
-                meta.algo,
-                meta.belief,
-                meta.scenario,
+                shown(meta.algo),
+                shown(meta.belief),
+                shown(meta.scenario),  # a stranger's text: neither markup nor a terminal's escape codes
                 rating,
             )
     console.print(table, width=min(console.width, TABLE_WIDTH))

@@ -11,7 +11,9 @@ command that reads it (``play``, ``tournament``, ``export onnx``, ``zoo list|sho
 payload ran; then the totals (target: 0 payloads run; refusals are one line, exit 1). Then hostile records: a
 ``run.json`` that names code beside it, ``PECLI_TRUST=off``, a lock file linked outside, a durable state naming a
 model outside its run, metadata that claims huge networks, records nested too deep, numbers of 5000 digits, markup
-in a path; each outcome counted by class (target: 0 payloads, 0 internal errors).
+in a path, files that never end or never open (a link to /dev/zero, a FIFO), YAML aliases that expand past any
+config, weights and graphs that unpack or allocate gigabytes; each outcome counted by class (target: 0 payloads,
+0 internal errors, 0 hangs).
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+
+HANG_SECONDS = 300  # a command still running after this long is counted as hanging
 
 
 class Payload:
@@ -214,13 +218,17 @@ def hostile_records(out: Path, clean: Path) -> None:
         marker = zoo / "PAYLOAD_RAN"
         setup(zoo, run, marker, victim)
         args = [arg.format(zoo=zoo, run=run) for arg in command]
-        result = subprocess.run(
-            [sys.executable, "-m", "pecli", *args],
-            capture_output=True,
-            text=True,
-            cwd=zoo,
-            env={**__import__("os").environ, **(env or {})},
-        )
+        try:
+            result = subprocess.run(
+                [sys.executable, "-m", "pecli", *args],
+                capture_output=True,
+                text=True,
+                cwd=zoo,
+                env={**__import__("os").environ, **(env or {})},
+                timeout=HANG_SECONDS,
+            )
+        except subprocess.TimeoutExpired:
+            return label, "hang", f"still running after {HANG_SECONDS} s"
         payload = marker.exists() or victim.read_text() != "keep\n"
         kind = (
             "payload"
@@ -261,20 +269,29 @@ def hostile_records(out: Path, clean: Path) -> None:
 
         return setup
 
-    def huge_graph(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
-        """An export whose graph asks ONNX Runtime for a 10^6 x 10^6 tensor, its sidecar's hash made to match."""
-        import numpy as np
-        from onnx import TensorProto, helper, numpy_helper
-
-        from pecli.runtime import file_sha256, sidecar_path
-
+    def exported(zoo: Path, run: Path) -> Path:
+        """The run's pursuer exported beside it."""
         subprocess.run(
             [sys.executable, "-m", "pecli", "export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2"],
             check=True,
             capture_output=True,
             cwd=zoo,
         )
-        model = run / "pursuer" / "final.onnx"
+        return run / "pursuer" / "final.onnx"
+
+    def rewritten(model: Path, graph: bytes) -> None:
+        """``graph`` in place of the exported ``model``, its sidecar's hash made to match."""
+        from pecli.runtime import file_sha256, sidecar_path
+
+        model.write_bytes(graph)
+        edit_json(sidecar_path(model), model_sha256=file_sha256(model))
+
+    def huge_graph(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        """An export whose graph asks ONNX Runtime for a 10^6 x 10^6 tensor, its sidecar's hash made to match."""
+        import numpy as np
+        from onnx import TensorProto, helper, numpy_helper
+
+        model = exported(zoo, run)
         shape = numpy_helper.from_array(np.array([10**6, 10**6], np.int64), "shape")
         graph = helper.make_graph(
             [helper.make_node("ConstantOfShape", ["shape"], ["action"])],
@@ -283,8 +300,56 @@ def hostile_records(out: Path, clean: Path) -> None:
             [helper.make_tensor_value_info("action", TensorProto.FLOAT, None)],
             [shape],
         )
-        model.write_bytes(helper.make_model(graph).SerializeToString())
-        edit_json(sidecar_path(model), model_sha256=file_sha256(model))
+        rewritten(model, helper.make_model(graph).SerializeToString())
+
+    def sized_at_run_time(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        """An export whose graph joins its input's shape to 4096 x 8192: a size only the run decides."""
+        import numpy as np
+        import onnx
+        from onnx import TensorProto, helper, numpy_helper
+
+        model = exported(zoo, run)
+        graph = onnx.load(model)
+        graph.graph.initializer.extend(numpy_helper.from_array(np.array([n], np.int64), f"n{n}") for n in (4096, 8192))
+        graph.graph.node.extend(
+            [
+                helper.make_node("Shape", ["obs"], ["obs_shape"]),
+                helper.make_node("Concat", ["obs_shape", "n4096", "n8192"], ["huge_shape"], axis=0),
+                helper.make_node("ConstantOfShape", ["huge_shape"], ["huge"]),
+                helper.make_node("ReduceSum", ["huge"], ["huge_sum"], keepdims=0),
+            ]
+        )
+        graph.graph.output.append(helper.make_tensor_value_info("huge_sum", TensorProto.FLOAT, None))
+        rewritten(model, graph.SerializeToString())
+
+    def weights_bomb(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+        """policy.pth as 1 GiB of zeros: about a megabyte compressed."""
+        path = run / "pursuer" / "final.zip"
+        with zipfile.ZipFile(path) as archive:
+            entries = {name: archive.read(name) for name in archive.namelist()}
+        entries["policy.pth"] = bytes(1 << 30)
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+            for name, data in entries.items():
+                archive.writestr(name, data)
+
+    def linked(relative: str, target: str):
+        def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+            (run / relative).unlink(missing_ok=True)
+            (run / relative).symlink_to(target)
+
+        return setup
+
+    def fifo(relative: str):
+        def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
+            (run / relative).unlink(missing_ok=True)
+            __import__("os").mkfifo(run / relative)
+
+        return setup
+
+    aliases = "\n".join(
+        ["d0: &d0 {a: 1, b: 2}"]
+        + [f"d{i}: &d{i} {{" + ", ".join(f"k{j}: *d{i - 1}" for j in range(8)) + "}" for i in range(1, 12)]
+    )
 
     def text(relative: str, body: str):
         def setup(zoo: Path, run: Path, marker: Path, victim: Path) -> None:
@@ -308,6 +373,21 @@ def hostile_records(out: Path, clean: Path) -> None:
         case(
             "export: ConstantOfShape [10^6, 10^6]",
             huge_graph,
+            ["play", "-p", "{run}/pursuer/final.onnx", "-e", "greedy", "-n", "4"],
+        ),
+        case("config.yaml linked to /dev/zero", linked("config.yaml", "/dev/zero"), resume),
+        case("config.yaml a FIFO", fifo("config.yaml"), resume),
+        case("config.yaml of nested aliases (8^11 values)", text("config.yaml", aliases), resume),
+        case("policy.pth of 1 GiB zeros, compressed", weights_bomb, play),
+        case(
+            "policy.pth of bytes no pickle holds",
+            lambda z, r, m, v: rewrite_zip(r / "pursuer" / "final.zip", {"policy.pth": b"garbage" * 100}),
+            play,
+        ),
+        case("checkpoint a FIFO", fifo("pursuer/final.zip"), play),
+        case(
+            "export: a size joined to the input's shape",
+            sized_at_run_time,
             ["play", "-p", "{run}/pursuer/final.onnx", "-e", "greedy", "-n", "4"],
         ),
         case(
@@ -337,7 +417,8 @@ def hostile_records(out: Path, clean: Path) -> None:
             ],
         ),
     ]
-    counts = {kind: sum(row[1] == kind for row in rows) for kind in ("refused", "accepted", "internal", "payload")}
+    kinds = ("refused", "accepted", "internal", "hang", "payload")
+    counts = {kind: sum(row[1] == kind for row in rows) for kind in kinds}
     print("\n| hostile record | outcome | line |\n| --- | --- | --- |")
     for row in rows:
         print("| " + " | ".join(row) + " |")

@@ -63,14 +63,14 @@ class MetaGame:
     @property
     def pursuer_held_to(self) -> float:
         """The capture rate the pursuer mixture keeps against the zoo's strongest evader against it,
-        ``min_j (x M)_j``: the value for the equilibrium's, less for any other. The zoo's evaders are replies too,
-        so no best response can credit the mixture with more."""
-        return float((self.pursuer_mixture @ self.matrix).min())
+        ``min_j (x M)_j``: the value for an equilibrium mixture, at most the value for any other. The zoo's evaders
+        are replies too, so no best response can credit the mixture with more."""
+        return min(1.0, max(0.0, float((self.pursuer_mixture @ self.matrix).min())))  # round-off kept in [0, 1]
 
     @property
     def evader_caught_at_most(self) -> float:
         """The capture rate the zoo's strongest pursuer against the evader mixture reaches, ``max_i (M y)_i``."""
-        return float((self.matrix @ self.evader_mixture).max())
+        return min(1.0, max(0.0, float((self.matrix @ self.evader_mixture).max())))
 
     def exploitability(self) -> dict[str, float]:
         """Each player's exploitability within the zoo (0 for a player that is itself an equilibrium strategy),

@@ -37,7 +37,8 @@ SIDECAR_SUFFIX = ".json"  # final.onnx -> final.onnx.json
 
 
 MAX_SIDECAR_BYTES = 1 << 20
-MAX_ARENA_BYTES = 2 << 30  # what the exported graphs of one process may hold at once: an export needs megabytes
+MAX_ARENA_BYTES = 2 << 30  # what the exported graphs of one process may hold at once
+RUN_CHUNK = 2048  # games a graph runs at once: a batch of any size runs in chunks, well within the arena
 _arena: list[bool] = []  # one capped arena per process, made by the first model loaded
 
 
@@ -252,11 +253,18 @@ class ExportedModel:
                 raise ValueError("this model has a mixed belief: pass its uniform and normal draws")
             feed["uniform"] = np.asarray(uniform, dtype=np.float32)
             feed["normal"] = np.asarray(normal, dtype=np.float32)
+        games = len(feed["obs"])
+        parts = [
+            self._run({name: value[start : start + RUN_CHUNK] for name, value in feed.items()})
+            for start in range(0, games, RUN_CHUNK)
+        ] or [self._run(feed)]
+        return {name: np.concatenate([part[i] for part in parts]) for i, name in enumerate(self.outputs)}
+
+    def _run(self, feed: dict[str, np.ndarray]) -> list[np.ndarray]:
         try:
-            values = self.session.run(self.outputs, feed)
+            return self.session.run(self.outputs, feed)
         except Exception as exc:  # onnxruntime's own types: a graph that fails, or asks past the arena's cap
             raise ExportError(f"the exported graph failed to run: {_run_failure(str(exc))}") from None
-        return dict(zip(self.outputs, values))
 
     def sees(self, own: np.ndarray, opponent: np.ndarray) -> bool:
         """Whether this player's sensor sees ``opponent`` from ``own`` (SI states; the game's wedge test)."""

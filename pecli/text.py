@@ -6,7 +6,7 @@ import math
 import re
 
 VOWEL_SOUNDS = "aeiou"
-CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")  # what drives a terminal; tab and newline are kept
+CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f-\x9f]")  # what drives a terminal or breaks a line; tabs stay
 
 
 def article(word: str) -> str:

@@ -552,6 +552,22 @@ def test_the_ros2_example_is_valid_python() -> None:
     assert "from pecli.runtime import Controller" in source and "create_timer" in source
 
 
+def test_a_large_batch_runs_in_chunks_with_the_same_answers(exports, monkeypatch) -> None:
+    import pecli.runtime
+
+    _, model = exports["bimdn"]
+    loaded = ExportedModel.load(model)
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(7, loaded.frame_stack, loaded.dim))
+    history = rng.normal(size=(7, loaded.window, loaded.dim))
+    whole = loaded.run(obs, history)
+    monkeypatch.setattr(pecli.runtime, "RUN_CHUNK", 3)  # 3 + 3 + 1 games
+    chunked = loaded.run(obs, history)
+    assert whole.keys() == chunked.keys()
+    for name in whole:
+        np.testing.assert_allclose(chunked[name], whole[name], rtol=1e-6, atol=1e-6)
+
+
 def test_a_graph_that_asks_for_memory_at_run_time_fails_in_one_line(exports) -> None:
     """Sizes computed at run time from the input's shape pass the graph check (an export's own are so computed);
     the arena's cap refuses the allocation of a graph that joins large constants to them."""

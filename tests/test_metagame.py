@@ -179,6 +179,8 @@ def test_a_mixture_is_held_to_what_the_zoos_strongest_reply_gives_it() -> None:
     uniform = with_meta_solvers(game, "uniform", "last")
     assert uniform.pursuer_held_to == pytest.approx(0.5)  # (0.5, 0.5, 0.5): every evader alike
     assert uniform.evader_caught_at_most == pytest.approx(0.5)  # e2 alone: 0.5 by either pursuer
+    caught = solve(["p"], [f"e{j}" for j in range(9)], np.ones((1, 9)))  # 9 x (1/9) sums past 1 in floating point
+    assert with_meta_solvers(caught, "nash", "uniform").evader_caught_at_most <= 1.0
     newest = with_meta_solvers(game, "last", "uniform")
     assert newest.pursuer_held_to == pytest.approx(0.1)  # p1 alone: e0 holds it to 0.1
     assert newest.evader_caught_at_most == pytest.approx(max(1.6 / 3, 1.4 / 3))

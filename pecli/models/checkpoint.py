@@ -40,7 +40,7 @@ MAX_CRITICS = 64
 MAX_QUANTILES = 10_000
 BYTES_PER_WEIGHT = 4  # float32
 SMALL_NETWORK_BYTES = 16 << 20  # what building a network of any metadata may cost before its weights are checked
-WEIGHTS_PER_LEAST = 8  # policy.pth holds the networks with their targets and biases: about 3x least_weights
+MAX_PACKING = 8  # how far a checkpoint's .pth may compress: SB3 stores it as is; weights barely compress
 
 
 def _mlp(widths: list[int], inputs: int = 1, outputs: int = 1) -> int:
@@ -84,9 +84,8 @@ def least_weights(meta: CheckpointMeta) -> int:
 
 
 def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
-    """:class:`ZooError` unless the checkpoint's ``policy.pth`` unpacks to about what the network its metadata
-    describes holds: at least its weights, at most :data:`WEIGHTS_PER_LEAST` times them and a margin (read from
-    the zip's directory, nothing unpacked)."""
+    """:class:`ZooError` unless the checkpoint's ``policy.pth`` is no larger than :data:`MAX_WEIGHTS_BYTES` and
+    large enough for the network its metadata describes (read from the zip's directory, nothing unpacked)."""
     try:
         with zipfile.ZipFile(path) as archive:
             size = archive.getinfo("policy.pth").file_size
@@ -102,12 +101,6 @@ def check_weights_size(meta: CheckpointMeta, path: str | Path) -> None:
         raise ZooError(
             f"{path}: its metadata describes a network of at least {least:,} bytes of weights, more "
             f"than its {size:,} bytes hold (edited or damaged metadata)"
-        )
-    most = WEIGHTS_PER_LEAST * least + SMALL_NETWORK_BYTES
-    if size > most:  # a few compressed megabytes can unpack to gigabytes
-        raise ZooError(
-            f"{path}: its weights unpack to {size:,} bytes, more than the network its metadata describes holds "
-            f"({most:,} at most: edited or damaged)"
         )
 
 
@@ -164,6 +157,12 @@ def read_weights(
                 raise ZooError(
                     f"{path}: its weights unpack to more than {MAX_WEIGHTS_BYTES:,} bytes: not a pecli checkpoint"
                 )
+            for info in members:  # a few compressed megabytes must not unpack to gigabytes
+                if info.file_size > max(MAX_PACKING * info.compress_size, SMALL_NETWORK_BYTES):
+                    raise ZooError(
+                        f"{path}: its {info.filename} unpacks to {info.file_size:,} bytes from {info.compress_size:,}: "
+                        f"weights do not compress {MAX_PACKING} times (a zip bomb, or damaged)"
+                    )
             entries = {info.filename: archive.read(info) for info in members}
     except zipfile.BadZipFile:
         raise ZooError(f"{path}: not a checkpoint (damaged or not a zip file)") from None

@@ -4,4 +4,4 @@ The batched game lives in :mod:`pecli.game`, scenarios in :mod:`pecli.scenario`,
 everything that acts implements :class:`pecli.policies.Policy`.
 """
 
-__version__ = "0.13.0"
+__version__ = "0.14.0"

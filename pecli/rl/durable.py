@@ -34,7 +34,7 @@ import numpy as np
 import torch as th
 
 from pecli.errors import PecliError
-from pecli.io import atomic_path, atomic_write_json, read_json
+from pecli.io import atomic_path, atomic_write_json, read_bounded, read_json
 from pecli.models.buffers import end_episodes
 from pecli.trust import untrusted
 from pecli.zoo import ZooError
@@ -233,7 +233,7 @@ class DurableState:
     def restore(self, record: Record, model: Any, fit: Any = None) -> None:
         """Load the committed ``record`` (from :meth:`read`) into ``model``, built like the run's model
         (:func:`~pecli.rl.train.make_model` from the run's config), and into ``fit``."""
-        from pecli.models.checkpoint import load_tensors, restore_model
+        from pecli.models.checkpoint import MAX_WEIGHTS_BYTES, load_tensors, restore_model
 
         self._collect_garbage(record)
         restore_model(model, self.directory / record.model)
@@ -257,7 +257,9 @@ class DurableState:
                     pairs.rng.bit_generator.state = record.belief_rng
                 if record.belief_optimizer:
                     path = self.directory / record.belief_optimizer
-                    fit.optimizer.load_state_dict(load_tensors(path, path))
+                    # as bytes, so that a damaged file is told apart from one of pickled objects
+                    state = read_bounded(path, "belief optimiser state", MAX_WEIGHTS_BYTES)
+                    fit.optimizer.load_state_dict(load_tensors(state, path))
         except ValueError as exc:
             if "allow_pickle" in str(exc):  # an object array: only unpickling could read it
                 raise untrusted(self.directory, "its buffer files hold pickled objects, not plain arrays") from None

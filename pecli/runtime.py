@@ -257,7 +257,7 @@ class ExportedModel:
         parts = [
             self._run({name: value[start : start + RUN_CHUNK] for name, value in feed.items()})
             for start in range(0, games, RUN_CHUNK)
-        ] or [self._run(feed)]
+        ] or [self._run(feed)]  # no games: the graph's empty answers
         return {name: np.concatenate([part[i] for part in parts]) for i, name in enumerate(self.outputs)}
 
     def _run(self, feed: dict[str, np.ndarray]) -> list[np.ndarray]:

@@ -24,12 +24,12 @@ import io
 import json
 import pickle
 import shutil
-import subprocess
 import sys
 import zipfile
 from pathlib import Path
 
 import numpy as np
+import reliability  # the reliability suite's subprocess runner (its time and memory limits)
 
 HANG_SECONDS = 300  # a command still running after this long is counted as hanging
 
@@ -44,8 +44,10 @@ class Payload:
         return (Path.touch, (self.marker,))
 
 
-def pecli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pecli", *args], capture_output=True, text=True, env=None)
+def pecli(*args: str) -> tuple[int, str]:
+    """``python -m pecli ARGS`` under the reliability suite's limits: its exit code (-1: still running after
+    :data:`HANG_SECONDS`) and its output."""
+    return reliability.pecli(list(args), reliability.environment(None), HANG_SECONDS)
 
 
 def rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
@@ -124,8 +126,8 @@ def main() -> None:
     made = pecli(
         "train", "pursuer", "-c", "quick", "--steps", "800", "--name", "victim", "--zoo", str(clean), "-q", *tiny
     )
-    if made.returncode != 0:
-        sys.exit(made.stdout + made.stderr)
+    if made[0] != 0:
+        sys.exit(made[1])
 
     def commands(zoo: Path, checkpoint: Path) -> dict[str, list[str]]:
         return {
@@ -184,13 +186,13 @@ def main() -> None:
         else:
             plant(checkpoint, marker)
         for name, command in commands(zoo, checkpoint).items():
-            result = pecli(*command)
+            code, output = pecli(*command)
             executed = marker.exists()
             marker.unlink(missing_ok=True)
             ran += executed
-            internal += result.returncode not in (0, 1, 2)  # 3: pecli's internal error; else a crash
-            lines = [line for line in (result.stderr + result.stdout).strip().splitlines() if line.startswith("error")]
-            rows.append((label, name, result.returncode, "YES" if executed else "no", lines[0][:110] if lines else ""))
+            internal += code not in (0, 1, 2)  # 3: pecli's internal error; -1: a hang; else a crash
+            lines = [line for line in output.splitlines() if line.startswith("error")]
+            rows.append((label, name, code, "YES" if executed else "no", lines[0][:110] if lines else ""))
     print("| file | command | exit | payload ran | refusal |\n| --- | --- | ---: | --- | --- |")
     for row in rows:
         print("| " + " | ".join(str(x) for x in row) + " |")
@@ -210,7 +212,7 @@ def hostile_records(out: Path, clean: Path) -> None:
     deep = "[" * 100_000 + "]" * 100_000
 
     def case(label: str, setup, command: list[str], env: dict[str, str] | None = None):
-        zoo = out / ("hostile-" + "".join(c if c.isalnum() else "-" for c in label))
+        zoo = (out / ("hostile-" + "".join(c if c.isalnum() else "-" for c in label))).resolve()
         shutil.copytree(clean, zoo)
         run = zoo / "victim"
         victim = out / f"victim-{zoo.name}.txt"
@@ -218,28 +220,13 @@ def hostile_records(out: Path, clean: Path) -> None:
         marker = zoo / "PAYLOAD_RAN"
         setup(zoo, run, marker, victim)
         args = [arg.format(zoo=zoo, run=run) for arg in command]
-        try:
-            result = subprocess.run(
-                [sys.executable, "-m", "pecli", *args],
-                capture_output=True,
-                text=True,
-                cwd=zoo,
-                env={**__import__("os").environ, **(env or {})},
-                timeout=HANG_SECONDS,
-            )
-        except subprocess.TimeoutExpired:
+        # the zoo on the import path, as if pecli ran in it; the reliability suite's limits on time and memory
+        code, output = reliability.pecli(args, {**reliability.environment(None, zoo), **(env or {})}, HANG_SECONDS)
+        if code == -1:
             return label, "hang", f"still running after {HANG_SECONDS} s"
         payload = marker.exists() or victim.read_text() != "keep\n"
-        kind = (
-            "payload"
-            if payload
-            else "refused"
-            if result.returncode in (1, 2)
-            else "accepted"
-            if result.returncode == 0
-            else "internal"
-        )
-        lines = [line for line in (result.stderr + result.stdout).splitlines() if line.startswith("error")]
+        kind = "payload" if payload else "refused" if code in (1, 2) else "accepted" if code == 0 else "internal"
+        lines = [line for line in output.splitlines() if line.startswith("error")]
         return label, kind, lines[0][:110] if lines else ""
 
     final = "{run}/pursuer/final.zip"
@@ -271,12 +258,9 @@ def hostile_records(out: Path, clean: Path) -> None:
 
     def exported(zoo: Path, run: Path) -> Path:
         """The run's pursuer exported beside it."""
-        subprocess.run(
-            [sys.executable, "-m", "pecli", "export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2"],
-            check=True,
-            capture_output=True,
-            cwd=zoo,
-        )
+        code, output = pecli("export", "onnx", str(run / "pursuer" / "final.zip"), "-n", "2")
+        if code != 0:
+            sys.exit(output)
         return run / "pursuer" / "final.onnx"
 
     def rewritten(model: Path, graph: bytes) -> None:
